@@ -1,0 +1,276 @@
+//! The `#[repr(C)]` wire structs. Field order is the layout: never reorder, only append into
+//! the `reserved` words (and bump `schema_minor`) or create a `…V2` type.
+
+use crate::wire_struct;
+#[allow(unused_imports)]
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV1`].
+pub const MAX_TX_ELEMENTS: usize = 256;
+/// Maximum number of planes in a map ([`DopplerMapHeaderV1`], [`VectorFieldHeaderV1`]).
+pub const MAX_PLANES: usize = 8;
+
+/// `flags` bit: last message of the stream; the payload may be empty.
+pub const FLAG_END_OF_STREAM: u32 = 1;
+/// `flags` bit: the message was published by `replay` from a recording.
+pub const FLAG_REPLAYED: u32 = 2;
+/// `flags` bit: discontinuity (restart, replay loop): consumers flush their ensembles.
+pub const FLAG_RESET: u32 = 4;
+
+wire_struct! {
+    /// Common first field of every header (64 bytes).
+    pub struct MsgHeaderV1 as "sonoflow_msgs/MsgHeaderV1" {
+        /// Per-publisher sequence number starting at 0; a gap means a message was lost.
+        pub seq: u64,
+        /// Acquisition/event counter linking products to the RF frame they come from.
+        pub frame_id: u64,
+        /// Time of validity in seconds (simulation / acquisition time). Algorithms use this.
+        pub t_valid: f64,
+        /// Wall clock (UNIX ns) when the message was published; diagnostics only.
+        pub t_pub_ns: u64,
+        /// CPU time (ns) the producing node spent computing this message.
+        pub compute_ns: u64,
+        /// Bumped when a producer restarts or a replay loops.
+        pub incarnation: u32,
+        /// `FLAG_*` bits.
+        pub flags: u32,
+        /// Hash of the producing node's name.
+        pub source_id: u32,
+        /// Additive layout revision within the major version.
+        pub schema_minor: u32,
+        /// Reserved, zero.
+        pub reserved: [u32; 2],
+    }
+}
+
+wire_struct! {
+    /// A rectangular imaging grid: node (ix, iz) at (x0 + ix·dx, z0 + iz·dz). Maps are stored
+    /// row-major, index `iz·nx + ix`.
+    pub struct GridV1 as "sonoflow_msgs/GridV1" {
+        pub x0: f64,
+        pub z0: f64,
+        pub dx: f64,
+        pub dz: f64,
+        pub nx: u32,
+        pub nz: u32,
+    }
+}
+
+wire_struct! {
+    /// Header of a particle snapshot (fluid particles are the acoustic scatterers).
+    pub struct ParticleSnapshotHeaderV1 as "sonoflow_msgs/ParticleSnapshotHeaderV1" {
+        pub common: MsgHeaderV1,
+        pub n_particles: u32,
+        /// Number of particles of kind `PARTICLE_FLUID`.
+        pub n_fluid: u32,
+        /// Time step of the solver when the snapshot was taken (0 for analytic flows).
+        pub dt: f64,
+        /// Bounding box x_min, x_max, z_min, z_max (m).
+        pub bbox: [f32; 4],
+        pub reserved: [u32; 4],
+    }
+}
+
+/// `ParticleV1::kind`: fluid particle.
+pub const PARTICLE_FLUID: u32 = 0;
+/// `ParticleV1::kind`: wall (boundary) particle.
+pub const PARTICLE_WALL: u32 = 1;
+/// `ParticleV1::kind`: suspended rigid particle (platelet).
+pub const PARTICLE_PLATELET: u32 = 2;
+
+wire_struct! {
+    /// One particle (32 bytes).
+    pub struct ParticleV1 as "sonoflow_msgs/ParticleV1" {
+        /// Stable id for the particle's life.
+        pub id: u32,
+        /// `PARTICLE_FLUID`, `PARTICLE_WALL` or `PARTICLE_PLATELET`.
+        pub kind: u32,
+        pub x: f32,
+        pub z: f32,
+        pub vx: f32,
+        pub vz: f32,
+        /// Scattering amplitude (drawn once per particle).
+        pub amplitude: f32,
+        pub reserved: f32,
+    }
+}
+
+/// `RfFrameHeaderV1::sample_format`: real RF, f32, payload `[channel][sample]`.
+pub const SAMPLE_RF_F32: u32 = 0;
+/// `RfFrameHeaderV1::sample_format`: I/Q interleaved f32 (re, im), payload `[channel][sample][2]`.
+pub const SAMPLE_IQ_F32: u32 = 1;
+
+wire_struct! {
+    /// Header of one received RF frame (one transmit). Payload: f32, channel-major
+    /// (`data[ch·n_samples + k]`), sample k at t = t0 + k/fs.
+    pub struct RfFrameHeaderV1 as "sonoflow_msgs/RfFrameHeaderV1" {
+        pub common: MsgHeaderV1,
+        /// Sampling frequency (Hz).
+        pub fs: f64,
+        /// Time of the first sample (s) relative to the transmit.
+        pub t0: f64,
+        /// Centre frequency (Hz).
+        pub fc: f64,
+        /// Speed of sound (m/s).
+        pub c: f64,
+        /// Element pitch (m).
+        pub pitch: f64,
+        /// Plane-wave tilt (rad), 0 for non-plane transmits.
+        pub tx_angle: f64,
+        /// Pulse repetition frequency (Hz).
+        pub prf: f64,
+        pub n_channels: u32,
+        pub n_samples: u32,
+        /// Transmit index within the sequence.
+        pub tx_id: u32,
+        /// `SAMPLE_RF_F32` or `SAMPLE_IQ_F32`.
+        pub sample_format: u32,
+        /// Packet index of this frame.
+        pub packet: u32,
+        /// Frame index within the packet.
+        pub frame_in_packet: u32,
+        /// Transmit delays (s) per element, first `n_channels` used.
+        pub tx_delays: [f32; 256],
+    }
+}
+
+wire_struct! {
+    /// A complex sample.
+    pub struct Complex32 as "sonoflow_msgs/Complex32" {
+        pub re: f32,
+        pub im: f32,
+    }
+}
+
+wire_struct! {
+    /// Header of a beamformed I/Q image for one receive angle. Payload: `Complex32`, row-major
+    /// on `grid` (`iz·nx + ix`).
+    pub struct IqFrameHeaderV1 as "sonoflow_msgs/IqFrameHeaderV1" {
+        pub common: MsgHeaderV1,
+        pub grid: GridV1,
+        pub fc: f64,
+        pub c: f64,
+        pub prf: f64,
+        /// Receive steering angle (rad).
+        pub rx_angle: f64,
+        /// Transmit tilt (rad).
+        pub tx_angle: f64,
+        pub packet: u32,
+        pub frame_in_packet: u32,
+        pub tx_id: u32,
+        pub reserved: u32,
+    }
+}
+
+/// Plane ids of maps ([`DopplerMapHeaderV1::plane_ids`], [`VectorFieldHeaderV1::plane_ids`]).
+pub mod plane {
+    /// Unused slot.
+    pub const NONE: u32 = 0;
+    /// Axial (Doppler) velocity, m/s, positive toward the probe.
+    pub const VELOCITY: u32 = 1;
+    /// Slow-time power (R0).
+    pub const POWER: u32 = 2;
+    /// Normalised variance (1 − |R1|/R0).
+    pub const VARIANCE: u32 = 3;
+    /// Bit flags per pixel (stored as f32 integers): 1 = no estimate, 2 = aliasing suspected.
+    pub const FLAGS: u32 = 4;
+    /// Lateral velocity component, m/s.
+    pub const VX: u32 = 5;
+    /// Axial velocity component (+z = deeper), m/s.
+    pub const VZ: u32 = 6;
+    /// 1 inside the fluid, 0 outside.
+    pub const MASK: u32 = 7;
+    /// Weight / quality in [0, 1].
+    pub const WEIGHT: u32 = 8;
+
+    /// Human-readable plane name.
+    pub fn name(id: u32) -> &'static str {
+        match id {
+            VELOCITY => "velocity",
+            POWER => "power",
+            VARIANCE => "variance",
+            FLAGS => "flags",
+            VX => "vx",
+            VZ => "vz",
+            MASK => "mask",
+            WEIGHT => "weight",
+            _ => "unused",
+        }
+    }
+}
+
+wire_struct! {
+    /// Header of a colour-Doppler map for one receive angle. Payload: f32 planes,
+    /// `data[p·nx·nz + iz·nx + ix]`, plane meaning in `plane_ids`.
+    pub struct DopplerMapHeaderV1 as "sonoflow_msgs/DopplerMapHeaderV1" {
+        pub common: MsgHeaderV1,
+        pub grid: GridV1,
+        pub fc: f64,
+        pub c: f64,
+        pub prf: f64,
+        pub rx_angle: f64,
+        pub tx_angle: f64,
+        /// c·PRF/(4 fc): the aliasing limit (m/s).
+        pub nyquist_velocity: f64,
+        pub packet: u32,
+        pub packet_size: u32,
+        pub n_planes: u32,
+        /// Which estimator produced the map (free-form id).
+        pub estimator: u32,
+        pub plane_ids: [u32; 8],
+    }
+}
+
+/// `VectorFieldHeaderV1::source`: raw vector Doppler.
+pub const VECTOR_RAW: u32 = 0;
+/// `VectorFieldHeaderV1::source`: regularised.
+pub const VECTOR_REGULARISED: u32 = 1;
+/// `VectorFieldHeaderV1::source`: ground truth.
+pub const VECTOR_TRUTH: u32 = 2;
+
+wire_struct! {
+    /// Header of a 2-component vector field. Payload: f32 planes as in the Doppler map
+    /// (typically vx, vz, and mask or weight).
+    pub struct VectorFieldHeaderV1 as "sonoflow_msgs/VectorFieldHeaderV1" {
+        pub common: MsgHeaderV1,
+        pub grid: GridV1,
+        /// Smoothing parameter S used (regularised fields), else 0.
+        pub smoothing_s: f64,
+        /// Fraction of points down-weighted as outliers (regularised fields), else 0.
+        pub outlier_fraction: f64,
+        pub n_planes: u32,
+        /// `VECTOR_RAW`, `VECTOR_REGULARISED` or `VECTOR_TRUTH`.
+        pub source: u32,
+        pub packet: u32,
+        /// 1 if the producing iteration converged.
+        pub converged: u32,
+        pub plane_ids: [u32; 8],
+    }
+}
+
+/// `StageStatsHeaderV1::state`: node running.
+pub const STAGE_RUNNING: u32 = 0;
+/// `StageStatsHeaderV1::state`: node finished normally.
+pub const STAGE_FINISHED: u32 = 1;
+
+wire_struct! {
+    /// Per-message and final statistics of one node. Payload: the node name (UTF-8 bytes).
+    pub struct StageStatsHeaderV1 as "sonoflow_msgs/StageStatsHeaderV1" {
+        pub common: MsgHeaderV1,
+        pub node_index: u32,
+        /// `STAGE_RUNNING` or `STAGE_FINISHED`.
+        pub state: u32,
+        pub messages_in: u64,
+        pub messages_out: u64,
+        /// Sum of per-message compute time (thread CPU ns).
+        pub compute_ns_total: u64,
+        /// Process CPU time so far (ns).
+        pub cpu_ns: u64,
+        /// Wall time since the node started (ns).
+        pub wall_ns: u64,
+        /// Compute time of the last message (ns).
+        pub last_compute_ns: u64,
+        /// Bytes published so far.
+        pub bytes_out: u64,
+    }
+}
