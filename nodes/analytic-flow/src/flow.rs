@@ -34,17 +34,17 @@ pub enum FlowKind {
     /// positive flows along `a`. Particles leaving one end re-enter at the
     /// other (periodic along the axis).
     Poiseuille {
-        /// Axis point, lateral [m].
+        /// Axis point, lateral (m).
         center_x: f64,
-        /// Axis point, depth [m].
+        /// Axis point, depth (m).
         center_z: f64,
-        /// Axis angle from +x towards +z [degrees].
+        /// Axis angle from +x towards +z (degrees).
         angle_deg: f64,
-        /// Lumen diameter D [m].
+        /// Lumen diameter D (m).
         diameter: f64,
-        /// Signed centre-line speed [m/s].
+        /// Signed centre-line speed (m/s).
         v_max: f64,
-        /// Segment length along the axis [m].
+        /// Segment length along the axis (m).
         length: f64,
     },
     /// Rigid rotation of a disk of fluid.
@@ -55,13 +55,13 @@ pub enum FlowKind {
     /// downwards this appears **clockwise** (counter-clockwise in a plot with
     /// z upwards).
     RotatingDisk {
-        /// Centre, lateral [m].
+        /// Centre, lateral (m).
         center_x: f64,
-        /// Centre, depth [m].
+        /// Centre, depth (m).
         center_z: f64,
-        /// Disk radius [m].
+        /// Disk radius (m).
         radius: f64,
-        /// Angular velocity [rad/s].
+        /// Angular velocity (rad/s).
         omega: f64,
     },
 }
@@ -271,7 +271,9 @@ impl Geometry {
     /// uniformly distributed over the fluid area.
     pub(crate) fn local_from_unit(&self, u1: f64, u2: f64) -> (f64, f64) {
         match *self {
-            Geometry::Pipe { half_d, length, .. } => ((u1 - 0.5) * length, (2.0 * u2 - 1.0) * half_d),
+            Geometry::Pipe { half_d, length, .. } => {
+                ((u1 - 0.5) * length, (2.0 * u2 - 1.0) * half_d)
+            }
             // rho = R sqrt(U) gives a density proportional to rho: uniform in area.
             Geometry::Disk { radius, .. } => (radius * u1.sqrt(), std::f64::consts::TAU * u2),
         }

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use crate::{require, ParamError};
 
 /// Regular grid in the (x, z) plane: node `(ix, iz)` lies at
-/// `(x0 + ix * dx, z0 + iz * dz)` [m].
+/// `(x0 + ix * dx, z0 + iz * dz)` (m).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct GridSpec {
@@ -13,13 +13,13 @@ pub struct GridSpec {
     pub nx: u32,
     /// Number of nodes along z.
     pub nz: u32,
-    /// x of node (0, 0) [m].
+    /// x of node (0, 0) (m).
     pub x0: f64,
-    /// z of node (0, 0) [m].
+    /// z of node (0, 0) (m).
     pub z0: f64,
-    /// Node spacing along x [m].
+    /// Node spacing along x (m).
     pub dx: f64,
-    /// Node spacing along z [m].
+    /// Node spacing along z (m).
     pub dz: f64,
 }
 
@@ -28,9 +28,9 @@ pub struct GridSpec {
 /// `mask = 1`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Truth {
-    /// Lateral velocity [m/s].
+    /// Lateral velocity (m/s).
     pub vx: Vec<f32>,
-    /// Axial (depth) velocity [m/s], positive = away from the probe.
+    /// Axial (depth) velocity (m/s), positive = away from the probe.
     pub vz: Vec<f32>,
     /// 1 inside the fluid, 0 outside.
     pub mask: Vec<u8>,
@@ -76,7 +76,7 @@ impl GridSpec {
         u64::from(self.nx) * u64::from(self.nz)
     }
 
-    /// Position of node `(ix, iz)` [m].
+    /// Position of node `(ix, iz)` (m).
     pub fn node(&self, ix: u32, iz: u32) -> (f64, f64) {
         (
             self.x0 + f64::from(ix) * self.dx,

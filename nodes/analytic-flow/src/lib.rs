@@ -56,13 +56,13 @@ use serde::{Deserialize, Serialize};
 pub struct Particles {
     /// Stable identifier, `0..n`, equal to the index.
     pub id: Vec<u32>,
-    /// Lateral position [m].
+    /// Lateral position (m).
     pub x: Vec<f32>,
-    /// Depth [m].
+    /// Depth (m).
     pub z: Vec<f32>,
-    /// Lateral velocity [m/s] (field at the current position).
+    /// Lateral velocity (m/s) (field at the current position).
     pub vx: Vec<f32>,
-    /// Depth velocity [m/s] (field at the current position).
+    /// Depth velocity (m/s) (field at the current position).
     pub vz: Vec<f32>,
     /// Scattering amplitude, N(0, amplitude_sigma²), fixed for life.
     pub amplitude: Vec<f32>,
@@ -151,11 +151,14 @@ impl AnalyticFlowParams {
             "density_per_mm2",
             self.density_per_mm2,
             expected >= 1.0,
-            format!("density_per_mm2 * fluid area ({area_mm2} mm^2) must give at least 1 scatterer"),
+            format!(
+                "density_per_mm2 * fluid area ({area_mm2} mm^2) must give at least 1 scatterer"
+            ),
         )?;
         if expected > f64::from(self.max_particles) {
             return Err(ParamError::TooManyParticles {
-                expected,
+                // Finite and >= 1 here; `as` saturates beyond u64::MAX.
+                expected: expected as u64,
                 max_particles: self.max_particles,
             });
         }
@@ -180,8 +183,8 @@ pub enum ParamError {
     /// The scatterer count `round(density_per_mm2 * area_mm2)` exceeds the limit.
     #[error("max_particles = {max_particles} is exceeded: density_per_mm2 * fluid area gives {expected} scatterers (lower density_per_mm2 or raise max_particles)")]
     TooManyParticles {
-        /// Expected scatterer count.
-        expected: f64,
+        /// Expected scatterer count (saturated at `u64::MAX`).
+        expected: u64,
         /// The configured limit.
         max_particles: u32,
     },
@@ -222,9 +225,9 @@ pub enum FlowError {
     /// The requested time is earlier than the current time.
     #[error("advance_to({requested}) goes backwards: current time is {current} s")]
     TimeWentBackwards {
-        /// Requested time [s].
+        /// Requested time (s).
         requested: f64,
-        /// Current time [s].
+        /// Current time (s).
         current: f64,
     },
     /// The requested time is NaN or infinite.
@@ -240,9 +243,9 @@ const CHUNK: usize = 4096;
 pub struct AnalyticFlow {
     params: AnalyticFlowParams,
     geometry: Geometry,
-    /// Seeding time [s] (`schedule.t_start`).
+    /// Seeding time (s) (`schedule.t_start`).
     t_seed: f64,
-    /// Current time [s].
+    /// Current time (s).
     t: f64,
     /// Per-particle local coordinates at seeding (see [`Geometry`]).
     local_a: Vec<f64>,
@@ -347,7 +350,7 @@ impl AnalyticFlow {
         &self.particles
     }
 
-    /// Current time [s].
+    /// Current time (s).
     pub fn time(&self) -> f64 {
         self.t
     }
@@ -357,7 +360,7 @@ impl AnalyticFlow {
         &self.params
     }
 
-    /// Exact velocity (vx, vz) [m/s] at (x, z), `None` outside the fluid.
+    /// Exact velocity (vx, vz) (m/s) at (x, z), `None` outside the fluid.
     /// The field is steady, so this does not depend on the current time.
     /// Points on the boundary count as inside; a scatterer lying on the
     /// boundary may round (f32) to just outside it.

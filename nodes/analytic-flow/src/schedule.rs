@@ -13,15 +13,15 @@ use crate::{require, ParamError};
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct Schedule {
-    /// Pulse (frame) repetition frequency within a packet [Hz]. Default 10 kHz.
+    /// Pulse (frame) repetition frequency within a packet (Hz). Default 10 kHz.
     pub prf: f64,
     /// Frames per packet (Doppler ensemble length). Default 32.
     pub packet_size: u32,
     /// Number of packets. Default 1.
     pub n_packets: u32,
-    /// Time between the starts of consecutive packets [s]. Default 0.1.
+    /// Time between the starts of consecutive packets (s). Default 0.1.
     pub packet_interval: f64,
-    /// Time of the first frame of the first packet [s]. Default 0.
+    /// Time of the first frame of the first packet (s). Default 0.
     pub t_start: f64,
 }
 
@@ -40,7 +40,7 @@ impl Default for Schedule {
 /// One frame of a [`Schedule`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AcquisitionTime {
-    /// Acquisition time [s].
+    /// Acquisition time (s).
     pub t: f64,
     /// Packet index, 0-based.
     pub packet: u32,
@@ -51,11 +51,11 @@ pub struct AcquisitionTime {
 }
 
 impl Schedule {
-    /// Largest accepted PRF [Hz].
+    /// Largest accepted PRF (Hz).
     pub const MAX_PRF: f64 = 1.0e7;
     /// Largest accepted total number of frames (`n_packets * packet_size`).
     pub const MAX_FRAMES: u64 = 10_000_000;
-    /// Largest accepted `t_start` and `packet_interval` [s].
+    /// Largest accepted `t_start` and `packet_interval` (s).
     pub const MAX_TIME: f64 = 1.0e6;
 
     /// Checks every field; the error names the field as `schedule.<name>`.
@@ -252,10 +252,34 @@ mod tests {
     #[test]
     fn invalid_schedules_name_the_field() {
         let cases: Vec<(Schedule, &str)> = vec![
-            (Schedule { prf: 0.0, ..sched() }, "schedule.prf"),
-            (Schedule { prf: f64::NAN, ..sched() }, "schedule.prf"),
-            (Schedule { packet_size: 0, ..sched() }, "schedule.packet_size"),
-            (Schedule { n_packets: 0, ..sched() }, "schedule.n_packets"),
+            (
+                Schedule {
+                    prf: 0.0,
+                    ..sched()
+                },
+                "schedule.prf",
+            ),
+            (
+                Schedule {
+                    prf: f64::NAN,
+                    ..sched()
+                },
+                "schedule.prf",
+            ),
+            (
+                Schedule {
+                    packet_size: 0,
+                    ..sched()
+                },
+                "schedule.packet_size",
+            ),
+            (
+                Schedule {
+                    n_packets: 0,
+                    ..sched()
+                },
+                "schedule.n_packets",
+            ),
             (
                 Schedule {
                     n_packets: 1_000_000,
@@ -264,7 +288,13 @@ mod tests {
                 },
                 "schedule.n_packets",
             ),
-            (Schedule { t_start: -1.0, ..sched() }, "schedule.t_start"),
+            (
+                Schedule {
+                    t_start: -1.0,
+                    ..sched()
+                },
+                "schedule.t_start",
+            ),
             (
                 Schedule {
                     t_start: f64::INFINITY,

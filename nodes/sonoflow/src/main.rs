@@ -1,1 +1,147 @@
-fn main(){}
+use clap::{Parser, Subcommand};
+use sonoflow::launch::{self, Overrides};
+use std::path::PathBuf;
+
+/// sonoflow — ultrasound flow imaging simulation as a graph of processes.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Check a launch file and run its graph.
+    Run {
+        /// Launch file (TOML), e.g. launch/quickstart.toml.
+        file: PathBuf,
+        /// Override a parameter: NODE.PARAM[.SUB]=VALUE (TOML value; repeatable).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        set: Vec<String>,
+        /// Select a node variant: NODE=VARIANT (repeatable).
+        #[arg(long = "swap", value_name = "NODE=VARIANT")]
+        swap: Vec<String>,
+        /// Output folder (default runs/<graph>-<date-time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Service prefix of this run (default: unique per run).
+        #[arg(long)]
+        run_id: Option<String>,
+        /// Only print errors, the recording and the report path.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Check a launch file without starting anything.
+    Check {
+        file: PathBuf,
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        set: Vec<String>,
+        #[arg(long = "swap", value_name = "NODE=VARIANT")]
+        swap: Vec<String>,
+    },
+    /// List the built-in node kinds and their ports.
+    Kinds,
+    /// Run one node process (started by `sonoflow run`, configured by SONOFLOW_NODE_CONFIG).
+    #[command(hide = true)]
+    Node { kind: String },
+    /// Summarise an MCAP recording (topics, counts, completeness, counters).
+    Inspect { file: PathBuf },
+    /// Rewrite a truncated recording (recorder killed) into a complete MCAP file.
+    Recover { input: PathBuf, output: PathBuf },
+    /// Remove shared-memory resources left by killed processes.
+    Clean,
+    /// Benchmarks (write a Markdown table).
+    Bench {
+        #[command(subcommand)]
+        what: sonoflow::bench::BenchCmd,
+    },
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let code = match real_main(cli) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("sonoflow: error: {e:#}");
+            1
+        }
+    };
+    std::process::exit(code);
+}
+
+fn real_main(cli: Cli) -> anyhow::Result<i32> {
+    match cli.cmd {
+        Cmd::Run { file, set, swap, out, run_id, quiet } => {
+            let g = match launch::load(&file, &Overrides { set, swap, lenient_files: false }) {
+                Ok(g) => g,
+                Err(errs) => return Ok(print_errors(&errs)),
+            };
+            for w in &g.warnings {
+                eprintln!("sonoflow: warning: {w}");
+            }
+            let out_dir = out.unwrap_or_else(|| sonoflow::run::default_out_dir(&g.graph.name));
+            let run_id = run_id.unwrap_or_else(|| sonoflow::run::new_run_id(&g.graph.name));
+            sonoflow::run::run(&g, &sonoflow::run::RunOptions { out_dir, run_id, quiet })
+        }
+        Cmd::Check { file, set, swap } => match launch::load(&file, &Overrides { set, swap, lenient_files: true }) {
+            Ok(g) => {
+                for w in &g.warnings {
+                    println!("warning: {w}");
+                }
+                println!(
+                    "{}: ok — {} node(s), {} topic(s), {:.1} MB shared memory",
+                    file.display(),
+                    g.nodes.len(),
+                    g.topics.len(),
+                    g.shm_bytes as f64 / 1e6
+                );
+                Ok(0)
+            }
+            Err(errs) => Ok(print_errors(&errs)),
+        },
+        Cmd::Kinds => {
+            for k in sonoflow::kinds::all() {
+                println!("{} — {}", k.name, k.about);
+                for p in k.ports {
+                    println!(
+                        "    {} {} : {}{}",
+                        p.dir.word(),
+                        p.name,
+                        p.kind,
+                        if p.required { "" } else { " (optional)" }
+                    );
+                }
+            }
+            Ok(0)
+        }
+        Cmd::Node { kind } => {
+            let spec = sonoflow::kinds::spec(&kind)
+                .ok_or_else(|| anyhow::anyhow!("unknown node kind `{kind}` (built-in: {})", sonoflow::kinds::names().join(", ")))?;
+            let kit = sonoflow_node_kit::Kit::from_env()?;
+            match (spec.run)(kit) {
+                Ok(()) => Ok(0),
+                Err(e) => {
+                    eprintln!("error: {e:#}");
+                    Ok(1)
+                }
+            }
+        }
+        Cmd::Inspect { file } => sonoflow::tools::inspect(&file),
+        Cmd::Recover { input, output } => sonoflow::tools::recover(&input, &output),
+        Cmd::Clean => {
+            let n = sonoflow_node_kit::cleanup_dead_nodes()?;
+            println!("removed the resources of {n} dead node(s)");
+            Ok(0)
+        }
+        Cmd::Bench { what } => sonoflow::bench::run(what),
+    }
+}
+
+fn print_errors(errs: &[String]) -> i32 {
+    for e in errs {
+        eprintln!("error: {e}");
+    }
+    eprintln!("{} problem(s) found; nothing was started", errs.len());
+    2
+}

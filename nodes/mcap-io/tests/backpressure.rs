@@ -1,0 +1,87 @@
+//! The queue between caller and writer thread is bounded in bytes and never drops.
+
+mod common;
+
+use common::{payload, read_all, simple_spec};
+use sonoflow_mcap_io::{OutMessage, RecorderWriter, WriterOptions};
+
+const MIB: usize = 1024 * 1024;
+
+#[test]
+fn tiny_queue_blocks_the_caller_and_loses_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("bp.mcap");
+    let opts = WriterOptions {
+        queue_bytes: MIB,
+        ..WriterOptions::default()
+    };
+    let mut w = RecorderWriter::create(&path, opts).expect("create");
+    let ch = w.add_channel(simple_spec("/big")).expect("channel");
+    let n = 50u32;
+    for seq in 0..n {
+        w.write(OutMessage {
+            channel: ch,
+            sequence: seq,
+            log_time: u64::from(seq),
+            publish_time: u64::from(seq),
+            data: payload(u64::from(seq), MIB),
+        })
+        .expect("write");
+        let stats = w.stats();
+        // A 1 MiB message (plus record overhead) never fits next to another one in a 1 MiB
+        // queue, so `write` may only return once everything before it has been written.
+        assert!(
+            stats.messages_written["/big"] >= u64::from(seq),
+            "write #{seq} returned with only {} messages written: no back-pressure",
+            stats.messages_written["/big"]
+        );
+        assert!(
+            stats.bytes_queued <= (MIB + 64) as u64,
+            "queue holds {} bytes",
+            stats.bytes_queued
+        );
+    }
+    let stats = w.finish().expect("finish");
+    assert_eq!(stats.messages_written["/big"], u64::from(n));
+    assert_eq!(stats.bytes_written, u64::from(n) * MIB as u64);
+    let (r, got) = read_all(&path);
+    assert!(r.is_complete());
+    assert_eq!(got.len(), n as usize);
+    for (seq, m) in got.iter().enumerate() {
+        assert_eq!(m.sequence, seq as u32);
+        assert!(m.data == payload(seq as u64, MIB), "payload {seq} differs");
+    }
+}
+
+#[test]
+fn queue_holds_several_small_messages_but_not_more_than_the_bound() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("bp-small.mcap");
+    let queue_bytes = 256 * 1024;
+    let opts = WriterOptions {
+        queue_bytes,
+        chunk_size: 256 * 1024,
+        ..WriterOptions::default()
+    };
+    let mut w = RecorderWriter::create(&path, opts).expect("create");
+    let ch = w.add_channel(simple_spec("/s")).expect("channel");
+    let n = 3000u32;
+    for seq in 0..n {
+        w.write(OutMessage {
+            channel: ch,
+            sequence: seq,
+            log_time: u64::from(seq),
+            publish_time: 0,
+            data: payload(u64::from(seq), 4000),
+        })
+        .expect("write");
+        assert!(w.stats().bytes_queued <= queue_bytes as u64);
+    }
+    w.finish().expect("finish");
+    let (_, got) = read_all(&path);
+    assert_eq!(got.len(), n as usize);
+    assert!(got
+        .iter()
+        .enumerate()
+        .all(|(i, m)| m.sequence == i as u32 && m.data == payload(i as u64, 4000)));
+}

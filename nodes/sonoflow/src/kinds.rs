@@ -1,0 +1,150 @@
+//! Registry of the built-in node kinds: their ports, parameter validation and entry points.
+
+use sonoflow_messages::MessageKind;
+
+/// Port direction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PortDir {
+    In,
+    Out,
+}
+
+impl PortDir {
+    pub fn word(self) -> &'static str {
+        match self {
+            PortDir::In => "input",
+            PortDir::Out => "output",
+        }
+    }
+}
+
+/// One port of a kind.
+pub struct PortSpec {
+    pub name: &'static str,
+    pub dir: PortDir,
+    pub kind: MessageKind,
+    pub required: bool,
+}
+
+/// A built-in node kind.
+pub struct KindSpec {
+    pub name: &'static str,
+    pub about: &'static str,
+    pub ports: &'static [PortSpec],
+    /// Inputs derived from `params.topics` (recorder).
+    pub dynamic_inputs: bool,
+    /// Outputs named after recorded topics (replay).
+    pub dynamic_outputs: bool,
+    /// Checks the `[params]` table (deserialise + validate).
+    pub validate: fn(&serde_json::Value) -> Result<(), String>,
+    /// Runs the node.
+    pub run: fn(sonoflow_node_kit::Kit) -> anyhow::Result<()>,
+}
+
+impl KindSpec {
+    pub fn port(&self, name: &str, dir: PortDir) -> Option<&PortSpec> {
+        self.ports.iter().find(|p| p.name == name && p.dir == dir)
+    }
+    pub fn port_names(&self, dir: PortDir) -> Vec<&'static str> {
+        let v: Vec<_> = self.ports.iter().filter(|p| p.dir == dir).map(|p| p.name).collect();
+        if v.is_empty() {
+            vec!["none"]
+        } else {
+            v
+        }
+    }
+}
+
+const fn port(name: &'static str, dir: PortDir, kind: MessageKind, required: bool) -> PortSpec {
+    PortSpec { name, dir, kind, required }
+}
+
+use MessageKind::*;
+use PortDir::*;
+
+static KINDS: &[KindSpec] = &[
+    KindSpec {
+        name: "analytic-flow",
+        about: "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk) at the acquisition times, plus the exact field as ground truth",
+        ports: &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_flow::validate,
+        run: crate::node_flow::run,
+    },
+    KindSpec {
+        name: "recorder",
+        about: "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
+        ports: &[],
+        dynamic_inputs: true,
+        dynamic_outputs: false,
+        validate: crate::node_recorder::validate,
+        run: crate::node_recorder::run,
+    },
+    KindSpec {
+        name: "replay",
+        about: "publishes the topics of an MCAP recording into the graph (outputs: recorded topic = graph topic)",
+        ports: &[],
+        dynamic_inputs: false,
+        dynamic_outputs: true,
+        validate: crate::node_replay::validate,
+        run: crate::node_replay::run,
+    },
+    KindSpec {
+        name: "test-source",
+        about: "deterministic RF test frames (pattern from seed and sequence number)",
+        ports: &[port("rf", Out, RfFrameV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_test::validate_source,
+        run: crate::node_test::run_source,
+    },
+    KindSpec {
+        name: "gain",
+        about: "multiplies RF frames by a constant (a minimal processing stage)",
+        ports: &[port("rf_in", In, RfFrameV1, true), port("rf_out", Out, RfFrameV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_test::validate_gain,
+        run: crate::node_test::run_gain,
+    },
+    KindSpec {
+        name: "checker",
+        about: "verifies test-source frames (× gain) bit for bit and writes <node>.json in the run folder",
+        ports: &[port("rf", In, RfFrameV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_test::validate_checker,
+        run: crate::node_test::run_checker,
+    },
+];
+
+/// Looks a kind up by name.
+pub fn spec(name: &str) -> Option<&'static KindSpec> {
+    KINDS.iter().find(|k| k.name == name)
+}
+
+/// Names of all kinds.
+pub fn names() -> Vec<&'static str> {
+    KINDS.iter().map(|k| k.name).collect()
+}
+
+/// All kinds.
+pub fn all() -> &'static [KindSpec] {
+    KINDS
+}
+
+/// Deserialises params (`null` = empty table) into `P`.
+pub fn parse<P: serde::de::DeserializeOwned>(v: &serde_json::Value) -> Result<P, String> {
+    let v = if v.is_null() { serde_json::json!({}) } else { v.clone() };
+    serde_json::from_value(v).map_err(|e| e.to_string())
+}
+
+/// Range check helper: `Err("field = v is out of range: lo ..= hi")`.
+pub fn in_range<T: PartialOrd + std::fmt::Display>(field: &str, v: T, lo: T, hi: T) -> Result<(), String> {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{field} = {v} is out of range: {lo} ..= {hi}"))
+    }
+}

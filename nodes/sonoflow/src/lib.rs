@@ -1,0 +1,15 @@
+//! `sonoflow` — the user-facing binary: launcher (`run`, `check`), built-in node kinds
+//! (`node <kind>`), recording tools (`inspect`, `recover`) and benchmarks (`bench`).
+//! Algorithms live in library crates; this crate wires them to the node kit.
+
+pub mod bench;
+pub mod kinds;
+pub mod launch;
+pub mod node_flow;
+pub mod node_recorder;
+pub mod node_replay;
+pub mod node_test;
+pub mod nodeutil;
+pub mod report;
+pub mod run;
+pub mod tools;

@@ -1,0 +1,261 @@
+//! Test-pattern nodes: `test-source` (deterministic RF frames), `gain` (a minimal processing
+//! stage, also the model for external nodes) and `checker` (verifies every sample bit for bit).
+//! They exercise the transport with real frame sizes (e.g. 128 × 8192 f32 = 4 MiB).
+
+use crate::kinds::{in_range, parse};
+use crate::nodeutil::{for_each, Flow};
+use serde::{Deserialize, Serialize};
+use sonoflow_messages::kinds::RfFrame;
+use sonoflow_messages::RfFrameHeaderV1;
+use sonoflow_node_kit::{thread_cpu_ns, Kit};
+
+/// Deterministic test value of sample `i` of frame `frame` (uniform in [-0.5, 0.5)).
+pub fn pattern(seed: u64, frame: u64, i: u64) -> f32 {
+    let mut x = seed
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ frame.wrapping_mul(0xD1B5_4A32_D192_ED03)
+        ^ i.wrapping_mul(0x94D0_49BB_1331_11EB);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^= x >> 31;
+    ((x >> 40) as f32) / 16_777_216.0 - 0.5
+}
+
+/// `test-source` parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SourceParams {
+    /// Frames to send.
+    pub n_frames: u64,
+    /// Channels per frame.
+    pub n_channels: u32,
+    /// Samples per channel.
+    pub n_samples: u32,
+    /// Pattern seed.
+    pub seed: u64,
+    /// Frame rate used for `t_valid` (Hz).
+    pub prf: f64,
+}
+
+impl Default for SourceParams {
+    fn default() -> Self {
+        Self { n_frames: 20, n_channels: 128, n_samples: 8192, seed: 1, prf: 1000.0 }
+    }
+}
+
+impl SourceParams {
+    fn validate(&self) -> Result<(), String> {
+        in_range("n_frames", self.n_frames, 1, 10_000_000)?;
+        in_range("n_channels", self.n_channels, 1, 1024)?;
+        in_range("n_samples", self.n_samples, 1, 1 << 20)?;
+        if !(self.prf.is_finite() && self.prf > 0.0 && self.prf <= 1e7) {
+            return Err(format!("prf = {} is out of range: (0, 1e7] Hz", self.prf));
+        }
+        Ok(())
+    }
+}
+
+pub fn validate_source(v: &serde_json::Value) -> Result<(), String> {
+    parse::<SourceParams>(v)?.validate()
+}
+
+pub fn run_source(mut kit: Kit) -> anyhow::Result<()> {
+    let p: SourceParams = parse(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    p.validate().map_err(anyhow::Error::msg)?;
+    let mut out = kit.output::<RfFrame>("rf")?;
+    kit.handshake(&mut [&mut out])?;
+    let n = p.n_channels as usize * p.n_samples as usize;
+    let step = (p.n_frames / 10).max(1);
+    for frame in 0..p.n_frames {
+        if kit.check_termination().is_err() {
+            break;
+        }
+        let t0 = thread_cpu_ns();
+        let mut h = RfFrameHeaderV1 {
+            fs: 20e6,
+            fc: 5e6,
+            c: 1540.0,
+            pitch: 0.3e-3,
+            prf: p.prf,
+            n_channels: p.n_channels,
+            n_samples: p.n_samples,
+            ..Default::default()
+        };
+        h.common.frame_id = frame;
+        h.common.t_valid = frame as f64 / p.prf;
+        let compute = thread_cpu_ns() - t0;
+        h.common.compute_ns = compute;
+        out.publish_in_place(n, h, |dst| {
+            for (i, d) in dst.iter_mut().enumerate() {
+                d.write(pattern(p.seed, frame, i as u64));
+            }
+        })?;
+        let compute = thread_cpu_ns() - t0;
+        kit.stats.messages_out += 1;
+        kit.stats.bytes_out += (n * 4) as u64;
+        kit.record(frame, frame as f64 / p.prf, compute)?;
+        if (frame + 1) % step == 0 || frame + 1 == p.n_frames {
+            kit.progress(frame + 1, p.n_frames);
+        }
+    }
+    out.publish_eos(p.n_frames as f64 / p.prf)?;
+    kit.finish()?;
+    Ok(())
+}
+
+/// `gain` parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GainParams {
+    /// Multiplier (finite).
+    pub gain: f32,
+}
+
+impl Default for GainParams {
+    fn default() -> Self {
+        Self { gain: 2.0 }
+    }
+}
+
+pub fn validate_gain(v: &serde_json::Value) -> Result<(), String> {
+    let p = parse::<GainParams>(v)?;
+    if !p.gain.is_finite() || p.gain.abs() > 1e30 {
+        return Err(format!("gain = {} is out of range: finite, |gain| <= 1e30", p.gain));
+    }
+    Ok(())
+}
+
+pub fn run_gain(mut kit: Kit) -> anyhow::Result<()> {
+    validate_gain(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let p: GainParams = parse(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut input = kit.input::<RfFrame>("rf_in")?;
+    let mut out = kit.output::<RfFrame>("rf_out")?;
+    kit.handshake(&mut [&mut input, &mut out])?;
+    let mut last_t = 0.0;
+    for_each(&mut kit, &mut input, |kit, sample| {
+        let t0 = thread_cpu_ns();
+        let src = sample.payload();
+        let mut h = *sample.user_header();
+        // Fresh common header: keep the frame id and time of validity only.
+        h.common = sonoflow_messages::MsgHeaderV1 {
+            frame_id: h.common.frame_id,
+            t_valid: h.common.t_valid,
+            ..Default::default()
+        };
+        last_t = h.common.t_valid;
+        out.publish_in_place(src.len(), h, |dst| {
+            for (d, s) in dst.iter_mut().zip(src) {
+                d.write(s * p.gain);
+            }
+        })?;
+        let compute = thread_cpu_ns() - t0;
+        kit.stats.messages_in += 1;
+        kit.stats.messages_out += 1;
+        kit.stats.bytes_out += (src.len() * 4) as u64;
+        kit.record(h.common.frame_id, h.common.t_valid, compute)?;
+        Ok(Flow::Continue)
+    })?;
+    out.publish_eos(last_t)?;
+    kit.stats.gaps = input.gaps;
+    kit.finish()?;
+    Ok(())
+}
+
+/// `checker` parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckerParams {
+    /// Seed of the test source.
+    pub seed: u64,
+    /// Gain applied upstream (1 = none).
+    pub gain: f32,
+    /// Frames expected (0 = do not check the count).
+    pub n_frames: u64,
+}
+
+impl Default for CheckerParams {
+    fn default() -> Self {
+        Self { seed: 1, gain: 1.0, n_frames: 0 }
+    }
+}
+
+pub fn validate_checker(v: &serde_json::Value) -> Result<(), String> {
+    let p = parse::<CheckerParams>(v)?;
+    if !p.gain.is_finite() {
+        return Err(format!("gain = {} is out of range: finite", p.gain));
+    }
+    Ok(())
+}
+
+/// What the checker writes to `<out_dir>/<node>.json`.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct CheckReport {
+    pub frames_ok: u64,
+    pub frames_bad: u64,
+    pub samples_checked: u64,
+    pub bytes_checked: u64,
+    pub gaps: u64,
+    pub end_of_stream: bool,
+    pub first_error: Option<String>,
+}
+
+pub fn run_checker(mut kit: Kit) -> anyhow::Result<()> {
+    validate_checker(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let p: CheckerParams = parse(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut input = kit.input::<RfFrame>("rf")?;
+    kit.handshake(&mut [&mut input])?;
+    let mut rep = CheckReport::default();
+    for_each(&mut kit, &mut input, |kit, sample| {
+        let t0 = thread_cpu_ns();
+        let h = sample.user_header();
+        let data = sample.payload();
+        let frame = h.common.frame_id;
+        let n = h.n_channels as usize * h.n_samples as usize;
+        let mut bad = None;
+        if data.len() != n {
+            bad = Some(format!("frame {frame}: {} samples, header says {n}", data.len()));
+        } else if let Some((i, v)) = data
+            .iter()
+            .enumerate()
+            .find(|(i, v)| v.to_bits() != (pattern(p.seed, frame, *i as u64) * p.gain).to_bits())
+        {
+            bad = Some(format!(
+                "frame {frame} sample {i}: got {v}, expected {}",
+                pattern(p.seed, frame, i as u64) * p.gain
+            ));
+        }
+        match bad {
+            Some(e) => {
+                rep.frames_bad += 1;
+                rep.first_error.get_or_insert(e);
+            }
+            None => rep.frames_ok += 1,
+        }
+        rep.samples_checked += data.len() as u64;
+        rep.bytes_checked += (data.len() * 4) as u64;
+        kit.stats.messages_in += 1;
+        kit.record(frame, h.common.t_valid, thread_cpu_ns() - t0)?;
+        Ok(Flow::Continue)
+    })?;
+    rep.gaps = input.gaps;
+    rep.end_of_stream = input.eos;
+    kit.stats.gaps = input.gaps;
+    if let Some(dir) = &kit.cfg.out_dir {
+        let path = std::path::Path::new(dir).join(format!("{}.json", kit.cfg.node_name));
+        crate::nodeutil::write_atomic(&path, serde_json::to_string_pretty(&rep)?.as_bytes())?;
+    }
+    let expected_ok = p.n_frames == 0 || rep.frames_ok == p.n_frames;
+    kit.finish()?;
+    if rep.frames_bad > 0 || !expected_ok || rep.gaps > 0 {
+        anyhow::bail!(
+            "checker: {} good, {} bad frames (expected {}), {} gaps; first error: {}",
+            rep.frames_ok,
+            rep.frames_bad,
+            p.n_frames,
+            rep.gaps,
+            rep.first_error.as_deref().unwrap_or("none")
+        );
+    }
+    println!("checker: {} frames, {} MB verified bit for bit", rep.frames_ok, rep.bytes_checked as f64 / 1e6);
+    Ok(())
+}
