@@ -212,6 +212,11 @@ impl RecorderWriter {
     /// Creates `path` (which must not exist yet), writes the MCAP header and starts the writer
     /// thread.
     pub fn create(path: &Path, opts: WriterOptions) -> Result<Self, McapIoError> {
+        Self::create_impl(path, opts, u64::MAX)
+    }
+
+    /// `create`, with writes past `fail_at` bytes failing (fault injection for tests).
+    fn create_impl(path: &Path, opts: WriterOptions, fail_at: u64) -> Result<Self, McapIoError> {
         let file = OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -236,6 +241,7 @@ impl RecorderWriter {
         let sink = FileSink {
             file,
             pos: 0,
+            fail_at,
             shared: shared.clone(),
         };
         let writer = mcap_write_options(&opts)
@@ -477,11 +483,16 @@ pub(crate) fn sync_file_and_dir(file: &File, path: &Path) -> Result<(), McapIoEr
 struct FileSink {
     file: File,
     pos: u64,
+    /// Writes reaching past this offset fail (`u64::MAX` except in fault-injection tests).
+    fail_at: u64,
     shared: Arc<Shared>,
 }
 
 impl Write for FileSink {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        if self.pos.saturating_add(buf.len() as u64) > self.fail_at {
+            return Err(io::Error::other("injected write failure"));
+        }
         let n = self.file.write(buf)?;
         self.pos += n as u64;
         self.shared.file_bytes.store(self.pos, Ordering::Relaxed);
@@ -714,5 +725,119 @@ impl WriterThread {
         }
         self.chunk_closed();
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> ChannelSpec {
+        ChannelSpec {
+            topic: "/t".into(),
+            message_encoding: "raw".into(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn writer_thread_failure_is_reported_with_its_cause() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("fail.mcap");
+        let opts = WriterOptions {
+            compression: Compression::None,
+            chunk_size: 64 * 1024,
+            queue_bytes: 100 * 1024,
+            ..WriterOptions::default()
+        };
+        let mut w = RecorderWriter::create_impl(&path, opts, 200_000).expect("create");
+        let ch = w.add_channel(spec()).expect("channel");
+        let mut failed = None;
+        for seq in 0..1000u32 {
+            let msg = OutMessage {
+                channel: ch,
+                sequence: seq,
+                log_time: u64::from(seq),
+                publish_time: 0,
+                data: vec![seq as u8; 10 * 1024],
+            };
+            if let Err(e) = w.write(msg) {
+                failed = Some((seq, e));
+                break;
+            }
+        }
+        let (seq, err) = failed.expect("writes past the injected limit must fail");
+        assert!(seq > 5, "failed too early, at message {seq}");
+        match &err {
+            McapIoError::WriterThread(cause) => {
+                assert!(cause.contains("injected write failure"), "{cause}")
+            }
+            other => panic!("expected WriterThread, got {other:?}"),
+        }
+        // Every later call fails as well, promptly.
+        assert!(matches!(
+            w.metadata("m", BTreeMap::new()),
+            Err(McapIoError::WriterThread(_))
+        ));
+        assert!(matches!(
+            w.attach("a", "text/plain", vec![1; 10]),
+            Err(McapIoError::WriterThread(_))
+        ));
+        assert!(matches!(
+            w.add_channel(ChannelSpec {
+                topic: "/other".into(),
+                ..spec()
+            }),
+            Err(McapIoError::WriterThread(_))
+        ));
+        // finish() returns the original error, naming the file.
+        match w.finish() {
+            Err(McapIoError::Io { path: p, source }) => {
+                assert_eq!(p, path);
+                assert!(source.to_string().contains("injected"), "{source}");
+            }
+            other => panic!("expected Io, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn blocked_writer_wakes_up_when_the_thread_fails() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("fail-blocked.mcap");
+        let opts = WriterOptions {
+            compression: Compression::None,
+            queue_bytes: 1,
+            chunk_size: 1024,
+            ..WriterOptions::default()
+        };
+        let mut w = RecorderWriter::create_impl(&path, opts, 50_000).expect("create");
+        let ch = w.add_channel(spec()).expect("channel");
+        let w = &w;
+        // Several producers, all blocking on the 1-byte queue, must all get the error.
+        let results: Vec<_> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(move || {
+                        for seq in 0..10_000u32 {
+                            w.write(OutMessage {
+                                channel: ch,
+                                sequence: seq,
+                                log_time: 0,
+                                publish_time: 0,
+                                data: vec![0; 1000],
+                            })?;
+                        }
+                        Ok(())
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("producer panicked"))
+                .collect()
+        });
+        for r in results {
+            assert!(matches!(r, Err(McapIoError::WriterThread(_))), "{r:?}");
+        }
     }
 }

@@ -137,7 +137,14 @@ pub fn all() -> &'static [KindSpec] {
 /// Deserialises params (`null` = empty table) into `P`.
 pub fn parse<P: serde::de::DeserializeOwned>(v: &serde_json::Value) -> Result<P, String> {
     let v = if v.is_null() { serde_json::json!({}) } else { v.clone() };
-    serde_json::from_value(v).map_err(|e| e.to_string())
+    serde_path_to_error::deserialize(v).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." {
+            e.inner().to_string()
+        } else {
+            format!("{path}: {}", e.inner())
+        }
+    })
 }
 
 /// Range check helper: `Err("field = v is out of range: lo ..= hi")`.

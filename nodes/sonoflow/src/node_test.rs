@@ -35,11 +35,13 @@ pub struct SourceParams {
     pub seed: u64,
     /// Frame rate used for `t_valid` (Hz).
     pub prf: f64,
+    /// Send frames in real time at `prf` instead of as fast as possible.
+    pub paced: bool,
 }
 
 impl Default for SourceParams {
     fn default() -> Self {
-        Self { n_frames: 20, n_channels: 128, n_samples: 8192, seed: 1, prf: 1000.0 }
+        Self { n_frames: 20, n_channels: 128, n_samples: 8192, seed: 1, prf: 1000.0, paced: false }
     }
 }
 
@@ -66,9 +68,17 @@ pub fn run_source(mut kit: Kit) -> anyhow::Result<()> {
     kit.handshake(&mut [&mut out])?;
     let n = p.n_channels as usize * p.n_samples as usize;
     let step = (p.n_frames / 10).max(1);
+    let start = std::time::Instant::now();
+    let mut last_progress = start;
     for frame in 0..p.n_frames {
         if kit.check_termination().is_err() {
             break;
+        }
+        if p.paced {
+            let due = std::time::Duration::from_secs_f64(frame as f64 / p.prf);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
         }
         let t0 = thread_cpu_ns();
         let mut h = RfFrameHeaderV1 {
@@ -94,7 +104,8 @@ pub fn run_source(mut kit: Kit) -> anyhow::Result<()> {
         kit.stats.messages_out += 1;
         kit.stats.bytes_out += (n * 4) as u64;
         kit.record(frame, frame as f64 / p.prf, compute)?;
-        if (frame + 1) % step == 0 || frame + 1 == p.n_frames {
+        if (frame + 1) % step == 0 || frame + 1 == p.n_frames || last_progress.elapsed().as_secs_f64() > 1.0 {
+            last_progress = std::time::Instant::now();
             kit.progress(frame + 1, p.n_frames);
         }
     }

@@ -223,6 +223,9 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
         }
         let mut child = cmd.spawn().map_err(|e| anyhow::anyhow!("starting node `{}` ({program}): {e}", n.name))?;
         let idx = procs.len();
+        if !opts.quiet {
+            eprintln!("sonoflow: started node `{}` ({program}) pid {}", n.name, child.id());
+        }
         if let Some(o) = child.stdout.take() {
             spawn_reader(idx, o, false, tx.clone());
         }

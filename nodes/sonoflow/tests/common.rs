@@ -1,0 +1,128 @@
+//! Helpers for the cross-process tests: every run gets its own service prefix (run id) and
+//! output folder, and a guard kills the launcher (whose children get SIGTERM through their
+//! parent-death signal) if a test fails midway.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc::{channel, Receiver};
+use std::time::{Duration, Instant};
+
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_sonoflow")
+}
+
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("workspace root")
+}
+
+pub fn run_id(name: &str) -> String {
+    let n = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().subsec_nanos();
+    format!("test-{name}-{}-{n}", std::process::id())
+}
+
+/// Runs `sonoflow run FILE --out OUT --run-id … EXTRA…` to completion.
+pub fn run_graph(file: &str, out: &Path, extra: &[&str]) -> Output {
+    let name = Path::new(file).file_stem().unwrap().to_string_lossy().to_string();
+    let mut cmd = Command::new(bin());
+    cmd.arg("run").arg(root().join(file)).arg("--out").arg(out).arg("--run-id").arg(run_id(&name)).args(extra);
+    let out = cmd.output().expect("start sonoflow");
+    if std::env::var_os("SONOFLOW_TEST_VERBOSE").is_some() {
+        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+/// A launcher running in the background, with its stderr lines collected.
+pub struct Launcher {
+    pub child: Child,
+    pub lines: Receiver<String>,
+    pub seen: Vec<String>,
+}
+
+impl Launcher {
+    pub fn start(file: &str, out: &Path, extra: &[&str]) -> Self {
+        let name = Path::new(file).file_stem().unwrap().to_string_lossy().to_string();
+        let mut child = Command::new(bin())
+            .arg("run")
+            .arg(root().join(file))
+            .arg("--out")
+            .arg(out)
+            .arg("--run-id")
+            .arg(run_id(&name))
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start sonoflow");
+        let (tx, rx) = channel();
+        let err = child.stderr.take().unwrap();
+        let tx2 = tx.clone();
+        std::thread::spawn(move || {
+            for l in BufReader::new(err).lines().map_while(Result::ok) {
+                let _ = tx.send(l);
+            }
+        });
+        let outp = child.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            for l in BufReader::new(outp).lines().map_while(Result::ok) {
+                let _ = tx2.send(l);
+            }
+        });
+        Self { child, lines: rx, seen: Vec::new() }
+    }
+
+    /// Waits (bounded, 60 s) for a line containing `needle`; returns it.
+    pub fn wait_line(&mut self, needle: &str) -> String {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while Instant::now() < deadline {
+            if let Ok(l) = self.lines.recv_timeout(Duration::from_millis(100)) {
+                self.seen.push(l.clone());
+                if l.contains(needle) {
+                    return l;
+                }
+            }
+        }
+        panic!("no line containing {needle:?}; seen:\n{}", self.seen.join("\n"));
+    }
+
+    /// Pid of a node from the launcher's "started node `NAME` … pid N" line.
+    pub fn node_pid(&mut self, node: &str) -> i32 {
+        let l = self.wait_line(&format!("started node `{node}`"));
+        l.rsplit(' ').next().unwrap().parse().unwrap()
+    }
+
+    /// Waits (bounded, 60 s) for the launcher to exit; returns its exit code and all lines.
+    pub fn finish(mut self) -> (i32, String) {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let code = loop {
+            if let Some(st) = self.child.try_wait().unwrap() {
+                break st.code().unwrap_or(-1);
+            }
+            assert!(Instant::now() < deadline, "launcher did not exit; seen:\n{}", self.seen.join("\n"));
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        std::thread::sleep(Duration::from_millis(100));
+        while let Ok(l) = self.lines.try_recv() {
+            self.seen.push(l);
+        }
+        (code, self.seen.join("\n"))
+    }
+}
+
+impl Drop for Launcher {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+pub fn kill9(pid: i32) {
+    // SAFETY: kill(2) on a pid we were told about.
+    unsafe {
+        libc::kill(pid, libc::SIGKILL);
+    }
+}

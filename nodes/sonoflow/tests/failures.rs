@@ -1,0 +1,149 @@
+//! Crashes and bad input: kill -9 of a producer and of the recorder mid-run, and malformed
+//! launch files.
+
+mod common;
+use common::*;
+use sonoflow_mcap_io::{McapReader, ReadOptions};
+use std::process::Command;
+
+fn count(path: &std::path::Path, topic: &str) -> usize {
+    let r = McapReader::open(path).unwrap();
+    r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
+        .unwrap()
+        .map(|m| m.unwrap())
+        .count()
+}
+
+/// A clean small run: proves no stale resource from a killed run gets in the way.
+fn next_run_is_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_graph("tests/launch/record.toml", dir.path(), &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(count(&dir.path().join("recording.mcap"), "rf_gain"), 40);
+}
+
+#[test]
+fn kill9_of_a_producer_is_reported_and_the_recording_is_finished() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut l = Launcher::start("tests/launch/kill.toml", dir.path(), &[]);
+    let pid = l.node_pid("source");
+    l.wait_line("progress");
+    kill9(pid);
+    let (code, log) = l.finish();
+    assert_eq!(code, 1, "{log}");
+    assert!(log.contains("node `source` (sonoflow node test-source) killed by signal 9 (SIGKILL)"), "{log}");
+    // The recorder was stopped cleanly after the others: a complete file, marked incomplete.
+    let rec = dir.path().join("recording.mcap");
+    let r = McapReader::open(&rec).unwrap();
+    assert!(r.is_complete());
+    let n = count(&rec, "rf");
+    assert!(n > 0, "frames recorded before the kill");
+    let stats = r.metadata().into_iter().find(|(n, _)| n == "recording_stats").unwrap().1;
+    assert_eq!(stats["complete"], "false");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["status"], "failed");
+    next_run_is_clean();
+}
+
+#[test]
+fn kill9_of_the_recorder_leaves_a_readable_and_recoverable_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut l = Launcher::start("tests/launch/kill.toml", dir.path(), &[]);
+    let pid = l.node_pid("recorder");
+    l.wait_line("progress");
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    kill9(pid);
+    let (code, log) = l.finish();
+    assert_eq!(code, 1, "{log}");
+    assert!(log.contains("node `recorder` (sonoflow node recorder) killed by signal 9 (SIGKILL)"), "{log}");
+    let rec = dir.path().join("recording.mcap");
+    let r = McapReader::open(&rec).unwrap();
+    assert!(!r.is_complete(), "no summary after kill -9");
+    let n = count(&rec, "rf");
+    assert!(n > 0, "the chunks closed before the kill are readable");
+    // `sonoflow recover` turns it into a complete file with the same messages.
+    let fixed = dir.path().join("fixed.mcap");
+    let out = Command::new(bin()).arg("recover").arg(&rec).arg(&fixed).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(McapReader::open(&fixed).unwrap().is_complete());
+    assert_eq!(count(&fixed, "rf"), n);
+    next_run_is_clean();
+}
+
+fn check(text: &str, extra: &[&str]) -> (i32, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("bad.toml");
+    std::fs::write(&f, text).unwrap();
+    let out = Command::new(bin()).arg("check").arg(&f).args(extra).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).to_string())
+}
+
+const GOOD: &str = r#"
+[graph]
+name = "g"
+[topics]
+rf = { type = "RfFrameV1", max_elements = 1024 }
+[nodes.source]
+kind = "test-source"
+outputs = { rf = "rf" }
+params = { n_frames = 2, n_channels = 4, n_samples = 16 }
+[nodes.checker]
+kind = "checker"
+inputs = { rf = "rf" }
+"#;
+
+#[test]
+fn malformed_launch_files_give_one_clear_error_per_problem() {
+    assert_eq!(check(GOOD, &[]).0, 0, "{}", check(GOOD, &[]).1);
+    let cases: &[(&str, &[&str], &[&str])] = &[
+        // unknown key
+        (&GOOD.replace("[graph]\n", "[graph]\ncolour = 1\n"), &[], &["unknown field `colour`"]),
+        // dangling input + type mismatch + unknown topic
+        (
+            &GOOD.replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
+                .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV1\", max_elements = 10 }\n"),
+            &[],
+            &["carries RfFrameV1 but topic `iq` is IqFrameV1", "topic `iq` is consumed by checker but no node produces it"],
+        ),
+        // out-of-range params, several at once
+        (
+            &GOOD.replace("n_channels = 4", "n_channels = 0").replace("max_elements = 1024", "max_elements = 0"),
+            &[],
+            &["n_channels = 0 is out of range: 1 ..= 1024", "topics.rf.max_elements = 0 is out of range"],
+        ),
+        // unknown kind, unknown port
+        (&GOOD.replace("kind = \"checker\"", "kind = \"chekcer\""), &[], &["kind `chekcer` is unknown"]),
+        (&GOOD.replace("outputs = { rf = \"rf\" }", "outputs = { rf = \"rf\", iq = \"rf\" }"), &[], &["no output port `iq`"]),
+        // two producers
+        (
+            &format!("{GOOD}\n[nodes.source2]\nkind = \"test-source\"\noutputs = {{ rf = \"rf\" }}\n"),
+            &[],
+            &["topic `rf` has 2 producers"],
+        ),
+        // bad --set and --swap
+        (GOOD, &["--set", "source.n_frames=-3"], &["n_frames"]),
+        (GOOD, &["--set", "nosuch.x=1"], &["no node `nosuch`"]),
+        (GOOD, &["--swap", "source=fast"], &["node `source` has no variant `fast`"]),
+        // exec that does not exist, TOML syntax error
+        (&GOOD.replace("kind = \"checker\"", "exec = \"./no-such-binary\""), &[], &["exec `./no-such-binary` not found"]),
+        ("[graph\nname = 1", &[], &["TOML parse error"]),
+    ];
+    for (text, extra, needles) in cases {
+        let (code, err) = check(text, extra);
+        assert_eq!(code, 2, "expected a check failure for {extra:?}:\n{text}\n{err}");
+        for n in *needles {
+            assert!(err.contains(n), "missing {n:?} in:\n{err}");
+        }
+        assert!(err.contains("nothing was started"), "{err}");
+    }
+}
+
+#[test]
+fn out_of_range_parameters_stop_the_run_before_any_process_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_graph("launch/quickstart.toml", dir.path(), &["--set", "flow.flow.diameter=-1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("flow.diameter"), "{err}");
+    assert!(!dir.path().join("logs").exists(), "nothing was started");
+}
