@@ -33,12 +33,7 @@ pub fn encoded_len<M: WireMessage>(n: usize) -> usize {
 
 /// Appends the record of (`header`, `payload`) to `out`.
 pub fn encode_into<M: WireMessage>(header: &M::Header, payload: &[M::Elem], out: &mut Vec<u8>) {
-    encode_bytes_into(
-        bytemuck::bytes_of(header),
-        payload.len(),
-        bytemuck::cast_slice(payload),
-        out,
-    )
+    encode_bytes_into(bytemuck::bytes_of(header), payload.len(), bytemuck::cast_slice(payload), out)
 }
 
 /// Same as [`encode_into`] from raw header and payload bytes.

@@ -5,9 +5,7 @@
 
 use crate::kinds::{MessageKind, WireMessage};
 use crate::wire::*;
-use foxglove::schemas::{
-    packed_element_field::NumericType, PackedElementField, Pose, Quaternion, Vector2, Vector3,
-};
+use foxglove::schemas::{packed_element_field::NumericType, PackedElementField, Pose, Quaternion, Vector2, Vector3};
 use foxglove::Encode;
 
 /// An encoded Foxglove message with its schema.
@@ -124,9 +122,7 @@ fn grid(t: f64, g: &GridV1, n_planes: u32, ids: &[u32; 8], payload: &[u8]) -> Op
             }
         }
     }
-    let fields = (0..np)
-        .map(|p| field(crate::wire::plane::name(ids[p]), (4 * p) as u32))
-        .collect();
+    let fields = (0..np).map(|p| field(crate::wire::plane::name(ids[p]), (4 * p) as u32)).collect();
     encode(&foxglove::schemas::Grid {
         timestamp: timestamp(t),
         frame_id: "probe".into(),

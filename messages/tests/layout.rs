@@ -1,3 +1,5 @@
+#![allow(clippy::unwrap_used)]
+#![allow(clippy::field_reassign_with_default)]
 //! Pins the wire layout: a change here is a protocol change (bump the type name to `…V2`).
 use sonoflow_messages::kinds::*;
 use sonoflow_messages::*;

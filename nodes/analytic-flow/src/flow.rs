@@ -86,46 +86,19 @@ impl FlowKind {
         let coord = format!("finite, |value| <= {MAX_EXTENT_M} m");
         let extent = format!("finite, 0 < value <= {MAX_EXTENT_M} m");
         match *self {
-            FlowKind::Poiseuille {
-                center_x,
-                center_z,
-                angle_deg,
-                diameter,
-                v_max,
-                length,
-            } => {
+            FlowKind::Poiseuille { center_x, center_z, angle_deg, diameter, v_max, length } => {
                 require_abs("flow.center_x", center_x, MAX_EXTENT_M, &coord)?;
                 require_abs("flow.center_z", center_z, MAX_EXTENT_M, &coord)?;
-                require_abs(
-                    "flow.angle_deg",
-                    angle_deg,
-                    360.0,
-                    "finite, -360 <= value <= 360 degrees",
-                )?;
+                require_abs("flow.angle_deg", angle_deg, 360.0, "finite, -360 <= value <= 360 degrees")?;
                 require_pos("flow.diameter", diameter, MAX_EXTENT_M, &extent)?;
-                require_abs(
-                    "flow.v_max",
-                    v_max,
-                    MAX_SPEED,
-                    &format!("finite, |value| <= {MAX_SPEED} m/s"),
-                )?;
+                require_abs("flow.v_max", v_max, MAX_SPEED, &format!("finite, |value| <= {MAX_SPEED} m/s"))?;
                 require_pos("flow.length", length, MAX_EXTENT_M, &extent)?;
             }
-            FlowKind::RotatingDisk {
-                center_x,
-                center_z,
-                radius,
-                omega,
-            } => {
+            FlowKind::RotatingDisk { center_x, center_z, radius, omega } => {
                 require_abs("flow.center_x", center_x, MAX_EXTENT_M, &coord)?;
                 require_abs("flow.center_z", center_z, MAX_EXTENT_M, &coord)?;
                 require_pos("flow.radius", radius, MAX_EXTENT_M, &extent)?;
-                require_abs(
-                    "flow.omega",
-                    omega,
-                    MAX_OMEGA,
-                    &format!("finite, |value| <= {MAX_OMEGA} rad/s"),
-                )?;
+                require_abs("flow.omega", omega, MAX_OMEGA, &format!("finite, |value| <= {MAX_OMEGA} rad/s"))?;
             }
         }
         Ok(())
@@ -189,36 +162,13 @@ pub(crate) struct State {
 impl Geometry {
     pub(crate) fn from_kind(kind: &FlowKind) -> Self {
         match *kind {
-            FlowKind::Poiseuille {
-                center_x,
-                center_z,
-                angle_deg,
-                diameter,
-                v_max,
-                length,
-            } => {
+            FlowKind::Poiseuille { center_x, center_z, angle_deg, diameter, v_max, length } => {
                 let (az, ax) = angle_deg.to_radians().sin_cos();
-                Geometry::Pipe {
-                    cx: center_x,
-                    cz: center_z,
-                    ax,
-                    az,
-                    half_d: 0.5 * diameter,
-                    length,
-                    v_max,
-                }
+                Geometry::Pipe { cx: center_x, cz: center_z, ax, az, half_d: 0.5 * diameter, length, v_max }
             }
-            FlowKind::RotatingDisk {
-                center_x,
-                center_z,
-                radius,
-                omega,
-            } => Geometry::Disk {
-                cx: center_x,
-                cz: center_z,
-                radius,
-                omega,
-            },
+            FlowKind::RotatingDisk { center_x, center_z, radius, omega } => {
+                Geometry::Disk { cx: center_x, cz: center_z, radius, omega }
+            }
         }
     }
 
@@ -231,15 +181,7 @@ impl Geometry {
 
     pub(crate) fn velocity(&self, x: f64, z: f64) -> Option<(f64, f64)> {
         match *self {
-            Geometry::Pipe {
-                cx,
-                cz,
-                ax,
-                az,
-                half_d,
-                length,
-                v_max,
-            } => {
+            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max } => {
                 let (dx, dz) = (x - cx, z - cz);
                 let s = dx * ax + dz * az;
                 let q = -dx * az + dz * ax;
@@ -251,12 +193,7 @@ impl Geometry {
                     None
                 }
             }
-            Geometry::Disk {
-                cx,
-                cz,
-                radius,
-                omega,
-            } => {
+            Geometry::Disk { cx, cz, radius, omega } => {
                 let (dx, dz) = (x - cx, z - cz);
                 if dx * dx + dz * dz <= radius * radius {
                     Some((-omega * dz, omega * dx))
@@ -271,9 +208,7 @@ impl Geometry {
     /// uniformly distributed over the fluid area.
     pub(crate) fn local_from_unit(&self, u1: f64, u2: f64) -> (f64, f64) {
         match *self {
-            Geometry::Pipe { half_d, length, .. } => {
-                ((u1 - 0.5) * length, (2.0 * u2 - 1.0) * half_d)
-            }
+            Geometry::Pipe { half_d, length, .. } => ((u1 - 0.5) * length, (2.0 * u2 - 1.0) * half_d),
             // rho = R sqrt(U) gives a density proportional to rho: uniform in area.
             Geometry::Disk { radius, .. } => (radius * u1.sqrt(), std::f64::consts::TAU * u2),
         }
@@ -283,38 +218,20 @@ impl Geometry {
     /// coordinates `(a, b)`.
     pub(crate) fn state(&self, a: f64, b: f64, dt: f64) -> State {
         match *self {
-            Geometry::Pipe {
-                cx,
-                cz,
-                ax,
-                az,
-                half_d,
-                length,
-                v_max,
-            } => {
+            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max } => {
                 let q = b;
                 let u = pipe_speed(v_max, half_d, q);
                 let half_l = 0.5 * length;
                 // Periodic along the axis: s in [-L/2, L/2] (rem_euclid may
                 // round up to exactly L, which is still on the closed segment).
                 let s = (a + half_l + u * dt).rem_euclid(length) - half_l;
-                State {
-                    x: cx + s * ax - q * az,
-                    z: cz + s * az + q * ax,
-                    vx: u * ax,
-                    vz: u * az,
-                }
+                State { x: cx + s * ax - q * az, z: cz + s * az + q * ax, vx: u * ax, vz: u * az }
             }
             Geometry::Disk { cx, cz, omega, .. } => {
                 let rho = a;
                 let (sin, cos) = (b + omega * dt).sin_cos();
                 let (dx, dz) = (rho * cos, rho * sin);
-                State {
-                    x: cx + dx,
-                    z: cz + dz,
-                    vx: -omega * dz,
-                    vz: omega * dx,
-                }
+                State { x: cx + dx, z: cz + dz, vx: -omega * dz, vz: omega * dx }
             }
         }
     }
@@ -331,14 +248,7 @@ mod tests {
     use super::*;
 
     fn pipe(angle_deg: f64, v_max: f64) -> FlowKind {
-        FlowKind::Poiseuille {
-            center_x: 0.001,
-            center_z: 0.02,
-            angle_deg,
-            diameter: 6.0e-3,
-            v_max,
-            length: 0.04,
-        }
+        FlowKind::Poiseuille { center_x: 0.001, center_z: 0.02, angle_deg, diameter: 6.0e-3, v_max, length: 0.04 }
     }
 
     /// Profile values are exact algebra on O(1e-2) coordinates; a relative
@@ -358,9 +268,7 @@ mod tests {
 
                 // Centre (and a point along the axis) -> v_max along the axis.
                 for &s in &[0.0, 0.015, -0.019] {
-                    let (vx, vz) = f
-                        .velocity(cx + s * ax, cz + s * az)
-                        .expect("axis point inside");
+                    let (vx, vz) = f.velocity(cx + s * ax, cz + s * az).expect("axis point inside");
                     assert!((vx - v_max * ax).abs() <= tol * v_max.abs(), "{angle} {s}");
                     assert!((vz - v_max * az).abs() <= tol * v_max.abs(), "{angle} {s}");
                 }
@@ -398,12 +306,7 @@ mod tests {
     /// differences), zero-size tolerance apart from one rounding.
     #[test]
     fn disk_field_sign_and_extent() {
-        let f = FlowKind::RotatingDisk {
-            center_x: 0.0,
-            center_z: 0.03,
-            radius: 0.01,
-            omega: 2.0,
-        };
+        let f = FlowKind::RotatingDisk { center_x: 0.0, center_z: 0.03, radius: 0.01, omega: 2.0 };
         // Point to the right of the centre moves towards +z (deeper).
         let (vx, vz) = f.velocity(0.005, 0.03).expect("inside");
         assert!(vx.abs() < 1e-15 && (vz - 0.01).abs() < 1e-15);
@@ -417,12 +320,7 @@ mod tests {
 
     #[test]
     fn serde_round_trip_and_tags() {
-        let disk = FlowKind::RotatingDisk {
-            center_x: 0.0,
-            center_z: 0.03,
-            radius: 0.01,
-            omega: 6.0,
-        };
+        let disk = FlowKind::RotatingDisk { center_x: 0.0, center_z: 0.03, radius: 0.01, omega: 6.0 };
         let json = serde_json::to_string(&disk).expect("serialize");
         assert!(json.contains("\"type\":\"rotating-disk\""), "{json}");
         let back: FlowKind = serde_json::from_str(&json).expect("deserialize");

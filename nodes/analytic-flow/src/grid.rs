@@ -56,18 +56,8 @@ impl GridSpec {
         require("grid.z0", self.z0, self.z0.is_finite(), "finite")?;
         let far_x = self.x0 + f64::from(self.nx - 1) * self.dx;
         let far_z = self.z0 + f64::from(self.nz - 1) * self.dz;
-        require(
-            "grid.dx",
-            self.dx,
-            self.dx.is_finite() && self.dx > 0.0 && far_x.is_finite(),
-            "finite, > 0 m",
-        )?;
-        require(
-            "grid.dz",
-            self.dz,
-            self.dz.is_finite() && self.dz > 0.0 && far_z.is_finite(),
-            "finite, > 0 m",
-        )?;
+        require("grid.dx", self.dx, self.dx.is_finite() && self.dx > 0.0 && far_x.is_finite(), "finite, > 0 m")?;
+        require("grid.dz", self.dz, self.dz.is_finite() && self.dz > 0.0 && far_z.is_finite(), "finite, > 0 m")?;
         Ok(())
     }
 
@@ -78,9 +68,6 @@ impl GridSpec {
 
     /// Position of node `(ix, iz)` (m).
     pub fn node(&self, ix: u32, iz: u32) -> (f64, f64) {
-        (
-            self.x0 + f64::from(ix) * self.dx,
-            self.z0 + f64::from(iz) * self.dz,
-        )
+        (self.x0 + f64::from(ix) * self.dx, self.z0 + f64::from(iz) * self.dz)
     }
 }

@@ -151,9 +151,7 @@ impl AnalyticFlowParams {
             "density_per_mm2",
             self.density_per_mm2,
             expected >= 1.0,
-            format!(
-                "density_per_mm2 * fluid area ({area_mm2} mm^2) must give at least 1 scatterer"
-            ),
+            format!("density_per_mm2 * fluid area ({area_mm2} mm^2) must give at least 1 scatterer"),
         )?;
         if expected > f64::from(self.max_particles) {
             return Err(ParamError::TooManyParticles {
@@ -211,11 +209,7 @@ pub(crate) fn require(
     if ok {
         Ok(())
     } else {
-        Err(ParamError::OutOfRange {
-            field,
-            value: value.to_string(),
-            allowed: allowed.into(),
-        })
+        Err(ParamError::OutOfRange { field, value: value.to_string(), allowed: allowed.into() })
     }
 }
 
@@ -258,12 +252,11 @@ impl AnalyticFlow {
     pub fn new(params: &AnalyticFlowParams) -> Result<Self, ParamError> {
         let n = params.particle_count()?;
         let geometry = Geometry::from_kind(&params.flow);
-        let normal =
-            Normal::new(0.0, params.amplitude_sigma).map_err(|e| ParamError::OutOfRange {
-                field: "amplitude_sigma",
-                value: params.amplitude_sigma.to_string(),
-                allowed: e.to_string(),
-            })?;
+        let normal = Normal::new(0.0, params.amplitude_sigma).map_err(|e| ParamError::OutOfRange {
+            field: "amplitude_sigma",
+            value: params.amplitude_sigma.to_string(),
+            allowed: e.to_string(),
+        })?;
         let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
         let len = n as usize;
         let mut local_a = Vec::with_capacity(len);
@@ -307,10 +300,7 @@ impl AnalyticFlow {
             return Err(FlowError::NonFiniteTime(t));
         }
         if t < self.t {
-            return Err(FlowError::TimeWentBackwards {
-                requested: t,
-                current: self.t,
-            });
+            return Err(FlowError::TimeWentBackwards { requested: t, current: self.t });
         }
         if t > self.t {
             self.t = t;
@@ -381,17 +371,9 @@ impl AnalyticFlow {
         grid.validate()?;
         let nx = grid.nx as usize;
         let n = nx * grid.nz as usize;
-        let mut truth = Truth {
-            vx: vec![0.0; n],
-            vz: vec![0.0; n],
-            mask: vec![0; n],
-        };
+        let mut truth = Truth { vx: vec![0.0; n], vz: vec![0.0; n], mask: vec![0; n] };
         let geom = self.geometry;
-        (
-            truth.vx.par_chunks_mut(nx),
-            truth.vz.par_chunks_mut(nx),
-            truth.mask.par_chunks_mut(nx),
-        )
+        (truth.vx.par_chunks_mut(nx), truth.vz.par_chunks_mut(nx), truth.mask.par_chunks_mut(nx))
             .into_par_iter()
             .enumerate()
             .for_each(|(iz, (vx, vz, mask))| {

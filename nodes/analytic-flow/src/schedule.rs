@@ -27,13 +27,7 @@ pub struct Schedule {
 
 impl Default for Schedule {
     fn default() -> Self {
-        Self {
-            prf: 10.0e3,
-            packet_size: 32,
-            n_packets: 1,
-            packet_interval: 0.1,
-            t_start: 0.0,
-        }
+        Self { prf: 10.0e3, packet_size: 32, n_packets: 1, packet_interval: 0.1, t_start: 0.0 }
     }
 }
 
@@ -66,27 +60,13 @@ impl Schedule {
             self.prf.is_finite() && self.prf > 0.0 && self.prf <= Self::MAX_PRF,
             format!("finite, 0 < value <= {} Hz", Self::MAX_PRF),
         )?;
-        require(
-            "schedule.packet_size",
-            self.packet_size,
-            self.packet_size >= 1,
-            ">= 1",
-        )?;
-        require(
-            "schedule.n_packets",
-            self.n_packets,
-            self.n_packets >= 1,
-            ">= 1",
-        )?;
+        require("schedule.packet_size", self.packet_size, self.packet_size >= 1, ">= 1")?;
+        require("schedule.n_packets", self.n_packets, self.n_packets >= 1, ">= 1")?;
         require(
             "schedule.n_packets",
             self.n_packets,
             self.n_frames() <= Self::MAX_FRAMES,
-            format!(
-                "n_packets * packet_size <= {} (packet_size = {})",
-                Self::MAX_FRAMES,
-                self.packet_size
-            ),
+            format!("n_packets * packet_size <= {} (packet_size = {})", Self::MAX_FRAMES, self.packet_size),
         )?;
         require(
             "schedule.t_start",
@@ -97,8 +77,7 @@ impl Schedule {
         require(
             "schedule.packet_interval",
             self.packet_interval,
-            self.packet_interval.is_finite()
-                && (0.0..=Self::MAX_TIME).contains(&self.packet_interval),
+            self.packet_interval.is_finite() && (0.0..=Self::MAX_TIME).contains(&self.packet_interval),
             format!("finite, 0 <= value <= {} s", Self::MAX_TIME),
         )?;
         if self.n_packets > 1 {
@@ -109,9 +88,7 @@ impl Schedule {
                 "schedule.packet_interval",
                 self.packet_interval,
                 self.packet_interval >= duration * (1.0 - 1e-12),
-                format!(
-                    ">= packet_size / prf = {duration} s when n_packets > 1 (packets must not overlap)"
-                ),
+                format!(">= packet_size / prf = {duration} s when n_packets > 1 (packets must not overlap)"),
             )?;
         }
         Ok(())
@@ -126,9 +103,7 @@ impl Schedule {
     /// `t_start + packet * packet_interval + frame_in_packet / prf`.
     /// Meaningful for a valid schedule only.
     pub fn frame_time(&self, packet: u32, frame_in_packet: u32) -> f64 {
-        self.t_start
-            + f64::from(packet) * self.packet_interval
-            + f64::from(frame_in_packet) / self.prf
+        self.t_start + f64::from(packet) * self.packet_interval + f64::from(frame_in_packet) / self.prf
     }
 
     /// All frame times in acquisition order (packet-major). Returns an empty
@@ -144,8 +119,7 @@ impl Schedule {
                     t: self.frame_time(packet, frame_in_packet),
                     packet,
                     frame_in_packet,
-                    frame_id: u64::from(packet) * u64::from(self.packet_size)
-                        + u64::from(frame_in_packet),
+                    frame_id: u64::from(packet) * u64::from(self.packet_size) + u64::from(frame_in_packet),
                 });
             }
         }
@@ -163,10 +137,7 @@ impl Schedule {
 
     /// Time of the last frame (`frame_time(n_packets - 1, packet_size - 1)`).
     pub fn end_time(&self) -> f64 {
-        self.frame_time(
-            self.n_packets.saturating_sub(1),
-            self.packet_size.saturating_sub(1),
-        )
+        self.frame_time(self.n_packets.saturating_sub(1), self.packet_size.saturating_sub(1))
     }
 }
 
@@ -175,13 +146,7 @@ mod tests {
     use super::*;
 
     fn sched() -> Schedule {
-        Schedule {
-            prf: 5.0e3,
-            packet_size: 8,
-            n_packets: 3,
-            packet_interval: 0.05,
-            t_start: 0.25,
-        }
+        Schedule { prf: 5.0e3, packet_size: 8, n_packets: 3, packet_interval: 0.05, t_start: 0.25 }
     }
 
     /// Times are a handful of f64 operations on O(1) values, so a 1e-12 s
@@ -224,10 +189,7 @@ mod tests {
             assert!((s.packet_mid_time(p) - mean).abs() < 1e-12, "packet {p}");
         }
         // Single-frame packet: mid time is the frame time.
-        let one = Schedule {
-            packet_size: 1,
-            ..sched()
-        };
+        let one = Schedule { packet_size: 1, ..sched() };
         assert_eq!(one.packet_mid_time(2), one.frame_time(2, 0));
     }
 
@@ -235,13 +197,7 @@ mod tests {
     fn default_is_valid_and_continuous_interval_accepted() {
         Schedule::default().validate().expect("default valid");
         assert_eq!(Schedule::default().times().len(), 32);
-        let s = Schedule {
-            prf: 10.0e3,
-            packet_size: 32,
-            n_packets: 4,
-            packet_interval: 0.0032,
-            t_start: 0.0,
-        };
+        let s = Schedule { prf: 10.0e3, packet_size: 32, n_packets: 4, packet_interval: 0.0032, t_start: 0.0 };
         s.validate().expect("back-to-back packets are fine");
         let t = s.times();
         for w in t.windows(2) {
@@ -252,64 +208,15 @@ mod tests {
     #[test]
     fn invalid_schedules_name_the_field() {
         let cases: Vec<(Schedule, &str)> = vec![
-            (
-                Schedule {
-                    prf: 0.0,
-                    ..sched()
-                },
-                "schedule.prf",
-            ),
-            (
-                Schedule {
-                    prf: f64::NAN,
-                    ..sched()
-                },
-                "schedule.prf",
-            ),
-            (
-                Schedule {
-                    packet_size: 0,
-                    ..sched()
-                },
-                "schedule.packet_size",
-            ),
-            (
-                Schedule {
-                    n_packets: 0,
-                    ..sched()
-                },
-                "schedule.n_packets",
-            ),
-            (
-                Schedule {
-                    n_packets: 1_000_000,
-                    packet_size: 1_000,
-                    ..sched()
-                },
-                "schedule.n_packets",
-            ),
-            (
-                Schedule {
-                    t_start: -1.0,
-                    ..sched()
-                },
-                "schedule.t_start",
-            ),
-            (
-                Schedule {
-                    t_start: f64::INFINITY,
-                    ..sched()
-                },
-                "schedule.t_start",
-            ),
+            (Schedule { prf: 0.0, ..sched() }, "schedule.prf"),
+            (Schedule { prf: f64::NAN, ..sched() }, "schedule.prf"),
+            (Schedule { packet_size: 0, ..sched() }, "schedule.packet_size"),
+            (Schedule { n_packets: 0, ..sched() }, "schedule.n_packets"),
+            (Schedule { n_packets: 1_000_000, packet_size: 1_000, ..sched() }, "schedule.n_packets"),
+            (Schedule { t_start: -1.0, ..sched() }, "schedule.t_start"),
+            (Schedule { t_start: f64::INFINITY, ..sched() }, "schedule.t_start"),
             // 8 frames at 5 kHz last 1.6 ms; 1 ms interval would overlap.
-            (
-                Schedule {
-                    packet_interval: 1e-3,
-                    ..sched()
-                },
-                "schedule.packet_interval",
-            ),
+            (Schedule { packet_interval: 1e-3, ..sched() }, "schedule.packet_interval"),
         ];
         for (s, field) in cases {
             let err = s.validate().expect_err(field);

@@ -20,22 +20,14 @@ fn pipe_params(angle_deg: f64, v_max: f64) -> AnalyticFlowParams {
         density_per_mm2: 5.0,
         amplitude_sigma: 1.0,
         seed: 7,
-        schedule: Schedule {
-            t_start: 0.1,
-            ..Schedule::default()
-        },
+        schedule: Schedule { t_start: 0.1, ..Schedule::default() },
         max_particles: 2_000_000,
     }
 }
 
 fn disk_params(omega: f64) -> AnalyticFlowParams {
     AnalyticFlowParams {
-        flow: FlowKind::RotatingDisk {
-            center_x: 0.002,
-            center_z: 0.03,
-            radius: 0.01,
-            omega,
-        },
+        flow: FlowKind::RotatingDisk { center_x: 0.002, center_z: 0.03, radius: 0.01, omega },
         density_per_mm2: 7.3,
         amplitude_sigma: 2.5,
         seed: 11,
@@ -46,15 +38,7 @@ fn disk_params(omega: f64) -> AnalyticFlowParams {
 
 /// Axial and transverse local coordinates of an f32 particle position.
 fn pipe_local(p: &AnalyticFlowParams, x: f32, z: f32) -> (f64, f64) {
-    let FlowKind::Poiseuille {
-        center_x,
-        center_z,
-        angle_deg,
-        ..
-    } = p.flow
-    else {
-        panic!("not a pipe")
-    };
+    let FlowKind::Poiseuille { center_x, center_z, angle_deg, .. } = p.flow else { panic!("not a pipe") };
     let (az, ax) = angle_deg.to_radians().sin_cos();
     let (dx, dz) = (f64::from(x) - center_x, f64::from(z) - center_z);
     (dx * ax + dz * az, -dx * az + dz * ax)
@@ -101,8 +85,7 @@ fn poiseuille_advection_is_exact_and_periodic() {
             // x 2 times, |ax| + |az| <= sqrt 2) errs by < 4 HALF_ULP_POS. The
             // speed is evaluated at r from rounded positions (error
             // <= 2 HALF_ULP_POS), times |du/dr| <= 4 |v_max| / D, times dt.
-            let tol_d =
-                4.0 * HALF_ULP_POS + 4.0 * v_max.abs() / (2.0 * half_d) * 2.0 * HALF_ULP_POS * dt;
+            let tol_d = 4.0 * HALF_ULP_POS + 4.0 * v_max.abs() / (2.0 * half_d) * 2.0 * HALF_ULP_POS * dt;
             for i in 0..n {
                 let (s0, q0) = pipe_local(&p, before.x[i], before.z[i]);
                 let (s1, q1) = pipe_local(&p, after.x[i], after.z[i]);
@@ -111,21 +94,12 @@ fn poiseuille_advection_is_exact_and_periodic() {
                 assert!((q1 - q0).abs() <= 4.0 * HALF_ULP_POS, "r preserved");
                 let unwrapped = s0 + u * dt;
                 if unwrapped.abs() < 0.5 * length - tol_d {
-                    assert!(
-                        (d - u * dt).abs() <= tol_d,
-                        "particle {i}: displacement {d} vs u dt {}",
-                        u * dt
-                    );
+                    assert!((d - u * dt).abs() <= tol_d, "particle {i}: displacement {d} vs u dt {}", u * dt);
                 } else {
                     // Left through an end: re-entered at the other one.
                     let k = if unwrapped > 0.0 { -1.0 } else { 1.0 };
-                    let ok =
-                        (d - u * dt - k * length).abs() <= tol_d || (d - u * dt).abs() <= tol_d;
-                    assert!(
-                        ok,
-                        "particle {i}: wrapped displacement {d}, u dt {}",
-                        u * dt
-                    );
+                    let ok = (d - u * dt - k * length).abs() <= tol_d || (d - u * dt).abs() <= tol_d;
+                    assert!(ok, "particle {i}: wrapped displacement {d}, u dt {}", u * dt);
                     if (d - u * dt).abs() > tol_d {
                         wraps += 1;
                     }
@@ -136,33 +110,22 @@ fn poiseuille_advection_is_exact_and_periodic() {
                 // other error is the 4 HALF_ULP_POS position rounding.
                 let u_stored = f64::from(before.vx[i]) * ax + f64::from(before.vz[i]) * az;
                 let tol_tight = 4.0 * HALF_ULP_POS + 2.0 * v_max.abs() * dt / (1u64 << 24) as f64;
-                let d_unwrapped = if (d - u * dt).abs() > tol_d {
-                    d + length * (u * dt - d).signum()
-                } else {
-                    d
-                };
+                let d_unwrapped = if (d - u * dt).abs() > tol_d { d + length * (u * dt - d).signum() } else { d };
                 assert!(
                     (d_unwrapped - u_stored * dt).abs() <= tol_tight,
                     "particle {i}: displacement {d_unwrapped} vs stored u dt {}",
                     u_stored * dt
                 );
-                assert!(
-                    s1.abs() <= 0.5 * length + 4.0 * HALF_ULP_POS,
-                    "stays in segment"
-                );
+                assert!(s1.abs() <= 0.5 * length + 4.0 * HALF_ULP_POS, "stays in segment");
                 // Stored velocity = field at the new position: f32 rounding
                 // of v (relative 2^-24) plus the r-rounding term above.
                 let u1 = v_max * (1.0 - (q1 / half_d).powi(2)).max(0.0);
-                let tol_v =
-                    v_max.abs() * 1e-7 + 4.0 * v_max.abs() / (2.0 * half_d) * 2.0 * HALF_ULP_POS;
+                let tol_v = v_max.abs() * 1e-7 + 4.0 * v_max.abs() / (2.0 * half_d) * 2.0 * HALF_ULP_POS;
                 assert!((f64::from(after.vx[i]) - u1 * ax).abs() <= tol_v);
                 assert!((f64::from(after.vz[i]) - u1 * az).abs() <= tol_v);
             }
         }
-        assert!(
-            wraps > 50,
-            "large steps must exercise the periodic wrap ({wraps})"
-        );
+        assert!(wraps > 50, "large steps must exercise the periodic wrap ({wraps})");
     }
 }
 
@@ -196,10 +159,7 @@ fn disk_advection_is_exact_rotation() {
             let (rho, theta) = polar(pa.x[i], pa.z[i]);
             // Each rounded position errs by <= sqrt 2 HALF_ULP_POS in rho,
             // so a difference errs by <= 2.7 HALF_ULP_POS = 1.0e-8 = 1e-6 R.
-            assert!(
-                (rho - rho0[i]).abs() <= 1e-6 * radius,
-                "radius preserved, particle {i}"
-            );
+            assert!((rho - rho0[i]).abs() <= 1e-6 * radius, "radius preserved, particle {i}");
             let mut step = theta - theta_prev[i];
             step -= std::f64::consts::TAU * (step / std::f64::consts::TAU).round();
             turned[i] += step;
@@ -219,11 +179,7 @@ fn disk_advection_is_exact_rotation() {
         // only two roundings matter: angle error <= 2.7 HALF_ULP_POS / rho
         // <= 5e-6 rad for rho >= 0.2 R; closer particles are skipped.
         if rho0[i] >= 0.2 * radius {
-            assert!(
-                (turned[i] - total).abs() <= 1e-5,
-                "particle {i}: {} vs {total}",
-                turned[i]
-            );
+            assert!((turned[i] - total).abs() <= 1e-5, "particle {i}: {} vs {total}", turned[i]);
             checked += 1;
         }
     }
@@ -258,28 +214,16 @@ fn seeding_count_inside_uniform_and_amplitudes() {
     // Half the area lies within R / sqrt 2: binomial(n, 1/2), 4 standard
     // errors = 4 sqrt(n / 4).
     let four_se = 4.0 * (n as f64 / 4.0).sqrt();
-    assert!(
-        (inner as f64 - n as f64 / 2.0).abs() <= four_se,
-        "{inner} of {n}"
-    );
+    assert!((inner as f64 - n as f64 / 2.0).abs() <= four_se, "{inner} of {n}");
 
     // Amplitudes: mean within 4 sigma / sqrt n, std within 4 sigma / sqrt(2n)
     // (the normal-theory standard error of a sample standard deviation).
     let sigma = 2.5;
     let mean = pa.amplitude.iter().map(|&a| f64::from(a)).sum::<f64>() / n as f64;
-    let var = pa
-        .amplitude
-        .iter()
-        .map(|&a| (f64::from(a) - mean).powi(2))
-        .sum::<f64>()
-        / (n as f64 - 1.0);
+    let var = pa.amplitude.iter().map(|&a| (f64::from(a) - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0);
     let nf = n as f64;
     assert!(mean.abs() <= 4.0 * sigma / nf.sqrt(), "mean {mean}");
-    assert!(
-        (var.sqrt() - sigma).abs() <= 4.0 * sigma / (2.0 * nf).sqrt(),
-        "std {}",
-        var.sqrt()
-    );
+    assert!((var.sqrt() - sigma).abs() <= 4.0 * sigma / (2.0 * nf).sqrt(), "std {}", var.sqrt());
 
     // Vessel: 5 per mm^2 * 40 mm * 6 mm = 1200 exactly; uniform along and across.
     let p = pipe_params(20.0, 0.5);
@@ -305,13 +249,8 @@ fn seeding_is_reproducible_and_seed_dependent() {
     let b = AnalyticFlow::new(&p).expect("valid");
     assert_eq!(a.particles(), b.particles());
     let c = AnalyticFlow::new(&AnalyticFlowParams { seed: 8, ..p }).expect("valid");
-    let same = (0..a.particles().len())
-        .filter(|&i| a.particles().x[i] == c.particles().x[i])
-        .count();
-    assert!(
-        same < 10,
-        "another seed gives other positions ({same} equal)"
-    );
+    let same = (0..a.particles().len()).filter(|&i| a.particles().x[i] == c.particles().x[i]).count();
+    assert!(same < 10, "another seed gives other positions ({same} equal)");
     assert_ne!(a.particles().amplitude, c.particles().amplitude);
 }
 
@@ -337,28 +276,15 @@ fn seeded_at_t_start_with_field_velocity() {
 #[test]
 fn sample_truth_matches_velocity_and_disk_area() {
     let flow = AnalyticFlow::new(&disk_params(4.0)).expect("valid");
-    let grid = GridSpec {
-        nx: 130,
-        nz: 120,
-        x0: -0.011,
-        z0: 0.018,
-        dx: 2.0e-4,
-        dz: 2.5e-4,
-    };
+    let grid = GridSpec { nx: 130, nz: 120, x0: -0.011, z0: 0.018, dx: 2.0e-4, dz: 2.5e-4 };
     let truth = flow.sample_truth(&grid);
     let n = 130 * 120;
-    assert_eq!(
-        (truth.vx.len(), truth.vz.len(), truth.mask.len()),
-        (n, n, n)
-    );
+    assert_eq!((truth.vx.len(), truth.vz.len(), truth.mask.len()), (n, n, n));
     let mut inside = 0usize;
     for iz in 0..grid.nz {
         for ix in 0..grid.nx {
             let k = (iz * grid.nx + ix) as usize;
-            let (x, z) = (
-                grid.x0 + f64::from(ix) * grid.dx,
-                grid.z0 + f64::from(iz) * grid.dz,
-            );
+            let (x, z) = (grid.x0 + f64::from(ix) * grid.dx, grid.z0 + f64::from(iz) * grid.dz);
             match flow.velocity(x, z) {
                 Some((vx, vz)) => {
                     assert_eq!(truth.mask[k], 1);
@@ -380,10 +306,7 @@ fn sample_truth_matches_velocity_and_disk_area() {
     let ideal = std::f64::consts::PI * r * r / (grid.dx * grid.dz);
     let tol = std::f64::consts::TAU * r / grid.dx;
     assert!((inside as f64 - ideal).abs() <= tol, "{inside} vs {ideal}");
-    assert_eq!(
-        truth.mask.iter().map(|&m| usize::from(m)).sum::<usize>(),
-        inside
-    );
+    assert_eq!(truth.mask.iter().map(|&m| usize::from(m)).sum::<usize>(), inside);
 
     // Vessel: same node-wise identity.
     let flow = AnalyticFlow::new(&pipe_params(20.0, -0.4)).expect("valid");
@@ -404,59 +327,15 @@ fn sample_truth_matches_velocity_and_disk_area() {
 #[test]
 fn invalid_grid_is_reported() {
     let flow = AnalyticFlow::new(&AnalyticFlowParams::default()).expect("valid");
-    let good = GridSpec {
-        nx: 4,
-        nz: 3,
-        x0: 0.0,
-        z0: 0.0,
-        dx: 1e-3,
-        dz: 1e-3,
-    };
+    let good = GridSpec { nx: 4, nz: 3, x0: 0.0, z0: 0.0, dx: 1e-3, dz: 1e-3 };
     good.validate().expect("valid grid");
     let cases = [
-        (
-            GridSpec {
-                nx: 0,
-                ..good.clone()
-            },
-            "grid.nx",
-        ),
-        (
-            GridSpec {
-                nz: 0,
-                ..good.clone()
-            },
-            "grid.nz",
-        ),
-        (
-            GridSpec {
-                nx: 5000,
-                nz: 5000,
-                ..good.clone()
-            },
-            "grid.nz",
-        ),
-        (
-            GridSpec {
-                dx: 0.0,
-                ..good.clone()
-            },
-            "grid.dx",
-        ),
-        (
-            GridSpec {
-                dz: f64::NAN,
-                ..good.clone()
-            },
-            "grid.dz",
-        ),
-        (
-            GridSpec {
-                x0: f64::INFINITY,
-                ..good.clone()
-            },
-            "grid.x0",
-        ),
+        (GridSpec { nx: 0, ..good.clone() }, "grid.nx"),
+        (GridSpec { nz: 0, ..good.clone() }, "grid.nz"),
+        (GridSpec { nx: 5000, nz: 5000, ..good.clone() }, "grid.nz"),
+        (GridSpec { dx: 0.0, ..good.clone() }, "grid.dx"),
+        (GridSpec { dz: f64::NAN, ..good.clone() }, "grid.dz"),
+        (GridSpec { x0: f64::INFINITY, ..good.clone() }, "grid.x0"),
     ];
     for (g, field) in cases {
         let err = flow.try_sample_truth(&g).expect_err(field);
@@ -477,15 +356,7 @@ fn validation_errors_name_the_field() {
     };
     let set_pipe = |field: &str, v: f64| {
         with_flow(&pipe, &|k| {
-            if let FlowKind::Poiseuille {
-                center_x,
-                center_z,
-                angle_deg,
-                diameter,
-                v_max,
-                length,
-            } = k
-            {
+            if let FlowKind::Poiseuille { center_x, center_z, angle_deg, diameter, v_max, length } = k {
                 *match field {
                     "center_x" => center_x,
                     "center_z" => center_z,
@@ -499,13 +370,7 @@ fn validation_errors_name_the_field() {
     };
     let set_disk = |field: &str, v: f64| {
         with_flow(&disk, &|k| {
-            if let FlowKind::RotatingDisk {
-                center_x,
-                radius,
-                omega,
-                ..
-            } = k
-            {
+            if let FlowKind::RotatingDisk { center_x, radius, omega, .. } = k {
                 *match field {
                     "center_x" => center_x,
                     "radius" => radius,
@@ -527,76 +392,19 @@ fn validation_errors_name_the_field() {
         (set_disk("radius", -0.01), "flow.radius"),
         (set_disk("omega", f64::NAN), "flow.omega"),
         (set_disk("center_x", f64::INFINITY), "flow.center_x"),
-        (
-            AnalyticFlowParams {
-                density_per_mm2: 0.0,
-                ..pipe.clone()
-            },
-            "density_per_mm2",
-        ),
-        (
-            AnalyticFlowParams {
-                density_per_mm2: 2e4,
-                ..pipe.clone()
-            },
-            "density_per_mm2",
-        ),
-        (
-            AnalyticFlowParams {
-                density_per_mm2: f64::NAN,
-                ..pipe.clone()
-            },
-            "density_per_mm2",
-        ),
+        (AnalyticFlowParams { density_per_mm2: 0.0, ..pipe.clone() }, "density_per_mm2"),
+        (AnalyticFlowParams { density_per_mm2: 2e4, ..pipe.clone() }, "density_per_mm2"),
+        (AnalyticFlowParams { density_per_mm2: f64::NAN, ..pipe.clone() }, "density_per_mm2"),
         // 1e-4 per mm^2 * 240 mm^2 rounds to 0 scatterers.
+        (AnalyticFlowParams { density_per_mm2: 1e-4, ..pipe.clone() }, "density_per_mm2"),
+        (AnalyticFlowParams { amplitude_sigma: f64::INFINITY, ..pipe.clone() }, "amplitude_sigma"),
+        (AnalyticFlowParams { amplitude_sigma: 0.0, ..pipe.clone() }, "amplitude_sigma"),
+        (AnalyticFlowParams { schedule: Schedule { prf: 0.0, ..Schedule::default() }, ..pipe.clone() }, "schedule.prf"),
         (
-            AnalyticFlowParams {
-                density_per_mm2: 1e-4,
-                ..pipe.clone()
-            },
-            "density_per_mm2",
-        ),
-        (
-            AnalyticFlowParams {
-                amplitude_sigma: f64::INFINITY,
-                ..pipe.clone()
-            },
-            "amplitude_sigma",
-        ),
-        (
-            AnalyticFlowParams {
-                amplitude_sigma: 0.0,
-                ..pipe.clone()
-            },
-            "amplitude_sigma",
-        ),
-        (
-            AnalyticFlowParams {
-                schedule: Schedule {
-                    prf: 0.0,
-                    ..Schedule::default()
-                },
-                ..pipe.clone()
-            },
-            "schedule.prf",
-        ),
-        (
-            AnalyticFlowParams {
-                schedule: Schedule {
-                    packet_size: 0,
-                    ..Schedule::default()
-                },
-                ..pipe.clone()
-            },
+            AnalyticFlowParams { schedule: Schedule { packet_size: 0, ..Schedule::default() }, ..pipe.clone() },
             "schedule.packet_size",
         ),
-        (
-            AnalyticFlowParams {
-                max_particles: 2399,
-                ..pipe.clone()
-            },
-            "max_particles",
-        ),
+        (AnalyticFlowParams { max_particles: 2399, ..pipe.clone() }, "max_particles"),
     ];
     for (p, field) in &cases {
         let err = p.validate().expect_err(field);
@@ -606,17 +414,9 @@ fn validation_errors_name_the_field() {
         assert_eq!(err, err2);
     }
     // The particle-limit error states the expected count.
-    let err = AnalyticFlowParams {
-        max_particles: 2399,
-        ..pipe.clone()
-    }
-    .validate()
-    .expect_err("too many");
+    let err = AnalyticFlowParams { max_particles: 2399, ..pipe.clone() }.validate().expect_err("too many");
     assert!(err.to_string().contains("2400"), "{err}");
-    assert!(matches!(
-        err,
-        ParamError::TooManyParticles { expected: 2400, .. }
-    ));
+    assert!(matches!(err, ParamError::TooManyParticles { expected: 2400, .. }));
 }
 
 #[test]
@@ -627,23 +427,11 @@ fn advance_to_rejects_backwards_and_non_finite() {
     flow.advance_to(0.2).expect("same time is a no-op");
     assert_eq!(flow.particles(), &snapshot);
     let err = flow.advance_to(0.15).expect_err("backwards");
-    assert!(
-        matches!(err, FlowError::TimeWentBackwards { requested, current } if requested == 0.15 && current == 0.2)
-    );
-    assert!(matches!(
-        flow.advance_to(f64::NAN),
-        Err(FlowError::NonFiniteTime(_))
-    ));
-    assert!(matches!(
-        flow.advance_to(f64::INFINITY),
-        Err(FlowError::NonFiniteTime(_))
-    ));
+    assert!(matches!(err, FlowError::TimeWentBackwards { requested, current } if requested == 0.15 && current == 0.2));
+    assert!(matches!(flow.advance_to(f64::NAN), Err(FlowError::NonFiniteTime(_))));
+    assert!(matches!(flow.advance_to(f64::INFINITY), Err(FlowError::NonFiniteTime(_))));
     assert_eq!(flow.time(), 0.2);
-    assert_eq!(
-        flow.particles(),
-        &snapshot,
-        "failed calls leave the state unchanged"
-    );
+    assert_eq!(flow.particles(), &snapshot, "failed calls leave the state unchanged");
 }
 
 /// Advancing in one jump or in many steps gives the same state: positions
@@ -683,13 +471,7 @@ fn params_from_toml() {
     assert!(matches!(p.flow, FlowKind::RotatingDisk { radius, .. } if radius == 0.008));
     p.validate().expect("valid");
     assert!(toml::from_str::<AnalyticFlowParams>("densty_per_mm2 = 4.0").is_err());
-    assert!(toml::from_str::<AnalyticFlowParams>(
-        "[flow]\ntype = \"rotating-disk\"\nradius = 0.01"
-    )
-    .is_err());
+    assert!(toml::from_str::<AnalyticFlowParams>("[flow]\ntype = \"rotating-disk\"\nradius = 0.01").is_err());
     let json = serde_json::to_string(&p).expect("serialize");
-    assert_eq!(
-        serde_json::from_str::<AnalyticFlowParams>(&json).expect("parse"),
-        p
-    );
+    assert_eq!(serde_json::from_str::<AnalyticFlowParams>(&json).expect("parse"), p);
 }

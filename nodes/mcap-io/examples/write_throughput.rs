@@ -42,28 +42,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(a) => a.parse()?,
         None => 64,
     };
-    let base: PathBuf = args
-        .next()
-        .map(PathBuf::from)
-        .unwrap_or_else(std::env::temp_dir);
+    let base: PathBuf = args.next().map(PathBuf::from).unwrap_or_else(std::env::temp_dir);
     let dir = tempfile::tempdir_in(&base)?;
     let pool: Vec<Vec<u8>> = (0..8).map(noise_frame).collect();
     let payload_bytes = (n * SAMPLES * 4) as f64;
-    println!(
-        "{n} messages x 4 MiB noise-like f32 ({:.0} MB) into {}",
-        payload_bytes / 1e6,
-        base.display()
-    );
-    println!(
-        "{:<6} {:>10} {:>12} {:>8}",
-        "codec", "seconds", "MB/s", "ratio"
-    );
+    println!("{n} messages x 4 MiB noise-like f32 ({:.0} MB) into {}", payload_bytes / 1e6, base.display());
+    println!("{:<6} {:>10} {:>12} {:>8}", "codec", "seconds", "MB/s", "ratio");
     for compression in [Compression::None, Compression::Zstd, Compression::Lz4] {
         let path = dir.path().join(format!("bench-{compression}.mcap"));
-        let opts = WriterOptions {
-            compression,
-            ..WriterOptions::default()
-        };
+        let opts = WriterOptions { compression, ..WriterOptions::default() };
         let start = Instant::now();
         let mut w = RecorderWriter::create(&path, opts)?;
         let ch = w.add_channel(ChannelSpec {

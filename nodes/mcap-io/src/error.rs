@@ -38,10 +38,7 @@ pub enum McapIoError {
 
 impl McapIoError {
     pub(crate) fn io(path: impl Into<PathBuf>, source: io::Error) -> Self {
-        McapIoError::Io {
-            path: path.into(),
-            source,
-        }
+        McapIoError::Io { path: path.into(), source }
     }
 }
 

@@ -132,9 +132,7 @@ impl McapReader {
             }
         }
         if got < MAGIC.len() || magic[..] != *MAGIC {
-            return Err(McapIoError::NotMcap {
-                path: path.to_path_buf(),
-            });
+            return Err(McapIoError::NotMcap { path: path.to_path_buf() });
         }
         // SAFETY: the map is read-only and private to this reader. Like every reader of a
         // memory-mapped file we rely on no other process truncating the file while it is mapped
@@ -144,11 +142,7 @@ impl McapReader {
         let profile = read_profile(data);
 
         if let Some(indexed) = try_indexed(data) {
-            let message_counts = indexed
-                .summary
-                .stats
-                .as_ref()
-                .map(|s| s.channel_message_counts.clone());
+            let message_counts = indexed.summary.stats.as_ref().map(|s| s.channel_message_counts.clone());
             return Ok(Self {
                 path: path.to_path_buf(),
                 complete: true,
@@ -219,16 +213,9 @@ impl McapReader {
             .filter_map(|id| self.summary.channels.get(&id).map(|c| (id, c)))
             .map(|(id, c)| TopicInfo {
                 topic: c.topic.clone(),
-                schema_name: c
-                    .schema
-                    .as_ref()
-                    .map(|s| s.name.clone())
-                    .unwrap_or_default(),
+                schema_name: c.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
                 message_encoding: c.message_encoding.clone(),
-                message_count: self
-                    .message_counts
-                    .as_ref()
-                    .map(|m| m.get(&id).copied().unwrap_or(0)),
+                message_count: self.message_counts.as_ref().map(|m| m.get(&id).copied().unwrap_or(0)),
             })
             .collect()
     }
@@ -240,10 +227,7 @@ impl McapReader {
 
     /// The attachments as (name, media type, data), in file order.
     pub fn attachments(&self) -> Vec<(String, String, Vec<u8>)> {
-        self.full_attachments()
-            .into_iter()
-            .map(|a| (a.name, a.media_type, a.data))
-            .collect()
+        self.full_attachments().into_iter().map(|a| (a.name, a.media_type, a.data)).collect()
     }
 
     pub(crate) fn full_attachments(&self) -> Vec<FullAttachment> {
@@ -277,9 +261,7 @@ impl McapReader {
     /// The selected messages in `log_time` order (ties in file order). On an unfinished file
     /// these are the messages of all complete chunks; the cut-off tail is no error.
     pub fn messages(&self, opts: &ReadOptions) -> Result<MessageIter<'_>, McapIoError> {
-        Ok(MessageIter {
-            raw: self.raw_messages(opts)?,
-        })
+        Ok(MessageIter { raw: self.raw_messages(opts)? })
     }
 
     /// Like [`Self::messages`], but yields headers and payloads only (for [`crate::recover`]).
@@ -287,16 +269,8 @@ impl McapReader {
         let mut iopts = IndexedReaderOptions::new();
         if let Some(topics) = &opts.topics {
             // The indexed reader treats "no matching channel" as "no filter": short-circuit.
-            if !self
-                .summary
-                .channels
-                .values()
-                .any(|c| topics.contains(&c.topic))
-            {
-                return Ok(RawIter {
-                    reader: self,
-                    inner: None,
-                });
+            if !self.summary.channels.values().any(|c| topics.contains(&c.topic)) {
+                return Ok(RawIter { reader: self, inner: None });
             }
             iopts = iopts.include_topics(topics.iter().cloned());
         }
@@ -307,10 +281,7 @@ impl McapReader {
             iopts = iopts.ending_before(end);
         }
         let inner = IndexedReader::new_with_options(&self.summary, iopts)?;
-        Ok(RawIter {
-            reader: self,
-            inner: Some(inner),
-        })
+        Ok(RawIter { reader: self, inner: Some(inner) })
     }
 
     fn chunk_data(&self, offset: u64, length: usize) -> Result<&[u8], McapIoError> {
@@ -329,17 +300,10 @@ impl McapReader {
             .summary
             .channels
             .get(&header.channel_id)
-            .ok_or(McapIoError::Mcap(McapError::UnknownChannel(
-                header.sequence,
-                header.channel_id,
-            )))?;
+            .ok_or(McapIoError::Mcap(McapError::UnknownChannel(header.sequence, header.channel_id)))?;
         Ok(InMessage {
             topic: channel.topic.clone(),
-            schema_name: channel
-                .schema
-                .as_ref()
-                .map(|s| s.name.clone())
-                .unwrap_or_default(),
+            schema_name: channel.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
             message_encoding: channel.message_encoding.clone(),
             channel_metadata: channel.metadata.clone(),
             sequence: header.sequence,
@@ -394,9 +358,7 @@ impl Iterator for RawIter<'_> {
                 }
                 Some(Ok(IndexedReadEvent::ReadChunkRequest { offset, length })) => {
                     match self.reader.chunk_data(offset, length) {
-                        Ok(chunk) => inner
-                            .insert_chunk_record_data(offset, chunk)
-                            .map_err(McapIoError::Mcap),
+                        Ok(chunk) => inner.insert_chunk_record_data(offset, chunk).map_err(McapIoError::Mcap),
                         Err(e) => Err(e),
                     }
                 }
@@ -501,23 +463,14 @@ fn try_indexed(data: &[u8]) -> Option<Indexed> {
     }
     let mut metadata = Vec::new();
     for mi in &summary.metadata_indexes {
-        match parse_span(
-            data,
-            Span {
-                offset: mi.offset,
-                len: mi.length,
-            },
-        )? {
+        match parse_span(data, Span { offset: mi.offset, len: mi.length })? {
             Record::Metadata(m) => metadata.push((m.name, m.metadata)),
             _ => return None,
         }
     }
     let mut attachments = Vec::new();
     for ai in &summary.attachment_indexes {
-        let span = Span {
-            offset: ai.offset,
-            len: ai.length,
-        };
+        let span = Span { offset: ai.offset, len: ai.length };
         match parse_span(data, span)? {
             Record::Attachment { header, .. } => attachments.push(AttachmentInfo {
                 span,
@@ -529,11 +482,7 @@ fn try_indexed(data: &[u8]) -> Option<Indexed> {
             _ => return None,
         }
     }
-    Some(Indexed {
-        summary,
-        metadata,
-        attachments,
-    })
+    Some(Indexed { summary, metadata, attachments })
 }
 
 #[derive(Default)]
@@ -573,15 +522,7 @@ impl LinearScan {
         match self.schemas.get(&id) {
             Some(s) => s.name == name && s.encoding == encoding && *s.data == *data,
             None => {
-                self.schemas.insert(
-                    id,
-                    Arc::new(Schema {
-                        id,
-                        name,
-                        encoding,
-                        data: data.into(),
-                    }),
-                );
+                self.schemas.insert(id, Arc::new(Schema { id, name, encoding, data: data.into() }));
                 true
             }
         }
@@ -636,13 +577,7 @@ impl LinearScan {
             uncompressed_size: run.end - run.start,
         };
         if let Ok(data_offset) = index.compressed_data_offset() {
-            self.virtual_chunks.insert(
-                data_offset,
-                Span {
-                    offset: run.start,
-                    len: run.end - run.start,
-                },
-            );
+            self.virtual_chunks.insert(data_offset, Span { offset: run.start, len: run.end - run.start });
             self.chunk_indexes.push(index);
         }
     }
@@ -654,9 +589,7 @@ fn scan_chunk(header: mcap::records::ChunkHeader, compressed: &[u8]) -> Option<P
     for record in ChunkReader::new(header, compressed).ok()? {
         match record.ok()? {
             Record::Schema { header, data } => {
-                pending
-                    .schemas
-                    .push((header.id, header.name, header.encoding, data.into_owned()));
+                pending.schemas.push((header.id, header.name, header.encoding, data.into_owned()));
             }
             Record::Channel(c) => pending.channels.push(c),
             Record::Message { header, .. } => {
@@ -735,12 +668,7 @@ fn scan_linear(data: &[u8]) -> LinearScan {
                         }
                         _ => {
                             scan.close_run(run.take());
-                            run = Some(MessageRun {
-                                start: pos as u64,
-                                end: end as u64,
-                                min_time: t,
-                                max_time: t,
-                            });
+                            run = Some(MessageRun { start: pos as u64, end: end as u64, min_time: t, max_time: t });
                         }
                     }
                 }
@@ -762,10 +690,7 @@ fn scan_linear(data: &[u8]) -> LinearScan {
             },
             op::ATTACHMENT => match parse_record(opcode, body) {
                 Ok(Record::Attachment { header, .. }) => scan.attachments.push(AttachmentInfo {
-                    span: Span {
-                        offset: pos as u64,
-                        len: (end - pos) as u64,
-                    },
+                    span: Span { offset: pos as u64, len: (end - pos) as u64 },
                     log_time: header.log_time,
                     create_time: header.create_time,
                     name: header.name,

@@ -33,33 +33,19 @@ pub struct RecoverStats {
 /// with the [`WriterOptions`] defaults. `output` must not exist; it is fsynced when done.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverStats, McapIoError> {
     let reader = McapReader::open(input)?;
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(output)
-        .map_err(|e| {
-            if e.kind() == io::ErrorKind::AlreadyExists {
-                McapIoError::AlreadyExists {
-                    path: output.to_path_buf(),
-                }
-            } else {
-                McapIoError::io(output, e)
-            }
-        })?;
+    let file = OpenOptions::new().write(true).create_new(true).open(output).map_err(|e| {
+        if e.kind() == io::ErrorKind::AlreadyExists {
+            McapIoError::AlreadyExists { path: output.to_path_buf() }
+        } else {
+            McapIoError::io(output, e)
+        }
+    })?;
     let defaults = WriterOptions::default();
-    let profile = if reader.profile().is_empty() {
-        defaults.profile.clone()
-    } else {
-        reader.profile().to_string()
-    };
+    let profile = if reader.profile().is_empty() { defaults.profile.clone() } else { reader.profile().to_string() };
     let merr = |e| mcap_error(output, e);
     let mut writer = mcap::WriteOptions::new()
         .profile(profile)
-        .library(format!(
-            "sonoflow-mcap-io/{} recover ({})",
-            env!("CARGO_PKG_VERSION"),
-            mcap::LIBRARY_IDENTIFIER
-        ))
+        .library(format!("sonoflow-mcap-io/{} recover ({})", env!("CARGO_PKG_VERSION"), mcap::LIBRARY_IDENTIFIER))
         .compression(Compression::Zstd.to_mcap())
         .compression_level(defaults.compression_level)
         .compression_threads(0)
@@ -68,34 +54,22 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverStats, McapIoError>
         .map_err(merr)?;
 
     for schema in reader.schemas() {
-        writer
-            .add_schema_with_id(schema.id, &schema.name, &schema.encoding, &schema.data)
-            .map_err(merr)?;
+        writer.add_schema_with_id(schema.id, &schema.name, &schema.encoding, &schema.data).map_err(merr)?;
     }
     for channel in reader.channels() {
         let schema_id = channel.schema.as_ref().map(|s| s.id).unwrap_or(0);
         writer
-            .add_channel_with_id(
-                channel.id,
-                schema_id,
-                &channel.topic,
-                &channel.message_encoding,
-                &channel.metadata,
-            )
+            .add_channel_with_id(channel.id, schema_id, &channel.topic, &channel.message_encoding, &channel.metadata)
             .map_err(merr)?;
     }
     let mut messages = 0u64;
     for item in reader.raw_messages(&ReadOptions::default())? {
         let (header, data) = item?;
-        writer
-            .write_to_known_channel(&header, &data)
-            .map_err(merr)?;
+        writer.write_to_known_channel(&header, &data).map_err(merr)?;
         messages += 1;
     }
     for (name, metadata) in reader.metadata() {
-        writer
-            .write_metadata(&Metadata { name, metadata })
-            .map_err(merr)?;
+        writer.write_metadata(&Metadata { name, metadata }).map_err(merr)?;
     }
     for a in reader.full_attachments() {
         writer
@@ -109,14 +83,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverStats, McapIoError>
             .map_err(merr)?;
     }
     writer.finish().map_err(merr)?;
-    let file = writer
-        .into_inner()
-        .into_inner()
-        .map_err(|e| McapIoError::io(output, e.into_error()))?;
+    let file = writer.into_inner().into_inner().map_err(|e| McapIoError::io(output, e.into_error()))?;
     sync_file_and_dir(&file, output)?;
-    Ok(RecoverStats {
-        messages,
-        truncated_bytes: reader.truncated_bytes(),
-        was_complete: reader.is_complete(),
-    })
+    Ok(RecoverStats { messages, truncated_bytes: reader.truncated_bytes(), was_complete: reader.is_complete() })
 }

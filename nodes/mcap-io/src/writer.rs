@@ -77,27 +77,15 @@ pub struct ChannelSpec {
 
 impl ChannelSpec {
     fn has_schema(&self) -> bool {
-        !(self.schema_name.is_empty()
-            && self.schema_encoding.is_empty()
-            && self.schema_data.is_empty())
+        !(self.schema_name.is_empty() && self.schema_encoding.is_empty() && self.schema_data.is_empty())
     }
 
     /// Rough uncompressed size of the schema + channel records (for chunk-size accounting).
     fn record_bytes(&self) -> usize {
-        let meta: usize = self
-            .metadata
-            .iter()
-            .map(|(k, v)| 8 + k.len() + v.len())
-            .sum();
+        let meta: usize = self.metadata.iter().map(|(k, v)| 8 + k.len() + v.len()).sum();
         let channel = 9 + 2 + 2 + 4 + self.topic.len() + 4 + self.message_encoding.len() + 4 + meta;
         let schema = if self.has_schema() {
-            9 + 2
-                + 4
-                + self.schema_name.len()
-                + 4
-                + self.schema_encoding.len()
-                + 4
-                + self.schema_data.len()
+            9 + 2 + 4 + self.schema_name.len() + 4 + self.schema_encoding.len() + 4 + self.schema_data.len()
         } else {
             0
         };
@@ -135,26 +123,10 @@ pub struct WriterStats {
 }
 
 enum Command {
-    AddChannel {
-        id: u16,
-        spec: ChannelSpec,
-        cost: usize,
-    },
-    Message {
-        msg: OutMessage,
-        cost: usize,
-    },
-    Attach {
-        name: String,
-        media_type: String,
-        data: Vec<u8>,
-        time: u64,
-        cost: usize,
-    },
-    Metadata {
-        name: String,
-        map: BTreeMap<String, String>,
-    },
+    AddChannel { id: u16, spec: ChannelSpec, cost: usize },
+    Message { msg: OutMessage, cost: usize },
+    Attach { name: String, media_type: String, data: Vec<u8>, time: u64, cost: usize },
+    Metadata { name: String, map: BTreeMap<String, String> },
     Finish,
     Abandon,
 }
@@ -217,19 +189,13 @@ impl RecorderWriter {
 
     /// `create`, with writes past `fail_at` bytes failing (fault injection for tests).
     fn create_impl(path: &Path, opts: WriterOptions, fail_at: u64) -> Result<Self, McapIoError> {
-        let file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(path)
-            .map_err(|e| {
-                if e.kind() == io::ErrorKind::AlreadyExists {
-                    McapIoError::AlreadyExists {
-                        path: path.to_path_buf(),
-                    }
-                } else {
-                    McapIoError::io(path, e)
-                }
-            })?;
+        let file = OpenOptions::new().write(true).create_new(true).open(path).map_err(|e| {
+            if e.kind() == io::ErrorKind::AlreadyExists {
+                McapIoError::AlreadyExists { path: path.to_path_buf() }
+            } else {
+                McapIoError::io(path, e)
+            }
+        })?;
         let shared = Arc::new(Shared {
             queued: Mutex::new(0),
             space: Condvar::new(),
@@ -238,15 +204,8 @@ impl RecorderWriter {
             bytes_written: AtomicU64::new(0),
             file_bytes: AtomicU64::new(0),
         });
-        let sink = FileSink {
-            file,
-            pos: 0,
-            fail_at,
-            shared: shared.clone(),
-        };
-        let writer = mcap_write_options(&opts)
-            .create(sink)
-            .map_err(|e| mcap_error(path, e))?;
+        let sink = FileSink { file, pos: 0, fail_at, shared: shared.clone() };
+        let writer = mcap_write_options(&opts).create(sink).map_err(|e| mcap_error(path, e))?;
 
         let (tx, rx) = crossbeam_channel::bounded(QUEUE_CAPACITY);
         let thread_state = WriterThread {
@@ -323,10 +282,7 @@ impl RecorderWriter {
     /// Queues a metadata record (a named string map).
     pub fn metadata(&self, name: &str, map: BTreeMap<String, String>) -> Result<(), McapIoError> {
         self.check_alive()?;
-        self.send(Command::Metadata {
-            name: name.to_string(),
-            map,
-        })
+        self.send(Command::Metadata { name: name.to_string(), map })
     }
 
     /// Current counters (cheap: a few atomics and a short mutex).
@@ -372,9 +328,7 @@ impl RecorderWriter {
         }
         match thread.join() {
             Ok(result) => result,
-            Err(_) => Err(McapIoError::WriterThread(
-                "the writer thread panicked".to_string(),
-            )),
+            Err(_) => Err(McapIoError::WriterThread("the writer thread panicked".to_string())),
         }
     }
 
@@ -410,12 +364,7 @@ impl RecorderWriter {
                 *queued += cost;
                 return Ok(());
             }
-            queued = self
-                .shared
-                .space
-                .wait_timeout(queued, LIVENESS_POLL)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
+            queued = self.shared.space.wait_timeout(queued, LIVENESS_POLL).unwrap_or_else(PoisonError::into_inner).0;
         }
     }
 }
@@ -432,11 +381,7 @@ impl Drop for RecorderWriter {
 fn mcap_write_options(opts: &WriterOptions) -> mcap::WriteOptions {
     let mut w = mcap::WriteOptions::new()
         .profile(opts.profile.clone())
-        .library(format!(
-            "sonoflow-mcap-io/{} ({})",
-            env!("CARGO_PKG_VERSION"),
-            mcap::LIBRARY_IDENTIFIER
-        ))
+        .library(format!("sonoflow-mcap-io/{} ({})", env!("CARGO_PKG_VERSION"), mcap::LIBRARY_IDENTIFIER))
         .compression(opts.compression.to_mcap())
         // Chunks are closed by the writer thread (size, flush interval), never by mcap itself.
         .chunk_size(None)
@@ -459,10 +404,7 @@ pub(crate) fn mcap_error(path: &Path, e: mcap::McapError) -> McapIoError {
 }
 
 fn now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
-        .unwrap_or(0)
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)).unwrap_or(0)
 }
 
 /// Flushes and fsyncs `file`, then fsyncs the directory holding `path` so the new directory
@@ -473,9 +415,7 @@ pub(crate) fn sync_file_and_dir(file: &File, path: &Path) -> Result<(), McapIoEr
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(|e| McapIoError::io(dir, e))
+    File::open(dir).and_then(|d| d.sync_all()).map_err(|e| McapIoError::io(dir, e))
 }
 
 /// The writer's output: an unbuffered file that tracks its own position (so `stream_position`
@@ -548,9 +488,7 @@ impl WriterThread {
 
     fn run_inner(&mut self) -> Result<(), McapIoError> {
         let exit = loop {
-            let deadline = self
-                .chunk_opened
-                .and_then(|t| t.checked_add(self.flush_interval));
+            let deadline = self.chunk_opened.and_then(|t| t.checked_add(self.flush_interval));
             let cmd = match deadline {
                 Some(deadline) => match self.rx.recv_deadline(deadline) {
                     Ok(cmd) => cmd,
@@ -571,10 +509,7 @@ impl WriterThread {
                 Command::Abandon => break Exit::Abandon,
                 cmd => self.handle(cmd)?,
             }
-            if self
-                .chunk_opened
-                .is_some_and(|t| t.elapsed() >= self.flush_interval)
-            {
+            if self.chunk_opened.is_some_and(|t| t.elapsed() >= self.flush_interval) {
                 self.close_chunk()?;
             }
         };
@@ -584,11 +519,7 @@ impl WriterThread {
                 writer.finish().map_err(|e| mcap_error(&self.path, e))?;
                 let sink = writer.into_inner();
                 sync_file_and_dir(&sink.file, &self.path)?;
-                let len = sink
-                    .file
-                    .metadata()
-                    .map_err(|e| McapIoError::io(&self.path, e))?
-                    .len();
+                let len = sink.file.metadata().map_err(|e| McapIoError::io(&self.path, e))?.len();
                 self.shared.file_bytes.store(len, Ordering::Relaxed);
             }
             Exit::Abandon => {
@@ -612,19 +543,12 @@ impl WriterThread {
             Command::AddChannel { id, spec, cost } => {
                 let w = self.writer()?;
                 let schema_id = if spec.has_schema() {
-                    w.add_schema(&spec.schema_name, &spec.schema_encoding, &spec.schema_data)
-                        .map_err(err)?
+                    w.add_schema(&spec.schema_name, &spec.schema_encoding, &spec.schema_data).map_err(err)?
                 } else {
                     0
                 };
-                w.add_channel_with_id(
-                    id,
-                    schema_id,
-                    &spec.topic,
-                    &spec.message_encoding,
-                    &spec.metadata,
-                )
-                .map_err(err)?;
+                w.add_channel_with_id(id, schema_id, &spec.topic, &spec.message_encoding, &spec.metadata)
+                    .map_err(err)?;
                 self.note_chunk_bytes(cost as u64);
                 {
                     let mut counts = lock(&self.shared.counts);
@@ -648,9 +572,7 @@ impl WriterThread {
                     log_time: msg.log_time,
                     publish_time: msg.publish_time,
                 };
-                self.writer()?
-                    .write_to_known_channel(&header, &msg.data)
-                    .map_err(err)?;
+                self.writer()?.write_to_known_channel(&header, &msg.data).map_err(err)?;
                 self.note_chunk_bytes(record);
                 if self.chunk_bytes >= self.chunk_size {
                     self.close_chunk()?;
@@ -663,19 +585,11 @@ impl WriterThread {
                     }
                     counts[id] += 1;
                 }
-                self.shared
-                    .bytes_written
-                    .fetch_add(msg.data.len() as u64, Ordering::Relaxed);
+                self.shared.bytes_written.fetch_add(msg.data.len() as u64, Ordering::Relaxed);
                 drop(msg);
                 self.shared.release(cost);
             }
-            Command::Attach {
-                name,
-                media_type,
-                data,
-                time,
-                cost,
-            } => {
+            Command::Attach { name, media_type, data, time, cost } => {
                 // mcap closes the open chunk before an attachment.
                 self.writer()?
                     .attach(&mcap::Attachment {
@@ -691,12 +605,7 @@ impl WriterThread {
             }
             Command::Metadata { name, map } => {
                 // mcap closes the open chunk before a metadata record.
-                self.writer()?
-                    .write_metadata(&Metadata {
-                        name,
-                        metadata: map,
-                    })
-                    .map_err(err)?;
+                self.writer()?.write_metadata(&Metadata { name, metadata: map }).map_err(err)?;
                 self.chunk_closed();
             }
             Command::Finish | Command::Abandon => {}
@@ -733,11 +642,7 @@ mod tests {
     use super::*;
 
     fn spec() -> ChannelSpec {
-        ChannelSpec {
-            topic: "/t".into(),
-            message_encoding: "raw".into(),
-            ..Default::default()
-        }
+        ChannelSpec { topic: "/t".into(), message_encoding: "raw".into(), ..Default::default() }
     }
 
     #[test]
@@ -775,19 +680,10 @@ mod tests {
             other => panic!("expected WriterThread, got {other:?}"),
         }
         // Every later call fails as well, promptly.
+        assert!(matches!(w.metadata("m", BTreeMap::new()), Err(McapIoError::WriterThread(_))));
+        assert!(matches!(w.attach("a", "text/plain", vec![1; 10]), Err(McapIoError::WriterThread(_))));
         assert!(matches!(
-            w.metadata("m", BTreeMap::new()),
-            Err(McapIoError::WriterThread(_))
-        ));
-        assert!(matches!(
-            w.attach("a", "text/plain", vec![1; 10]),
-            Err(McapIoError::WriterThread(_))
-        ));
-        assert!(matches!(
-            w.add_channel(ChannelSpec {
-                topic: "/other".into(),
-                ..spec()
-            }),
+            w.add_channel(ChannelSpec { topic: "/other".into(), ..spec() }),
             Err(McapIoError::WriterThread(_))
         ));
         // finish() returns the original error, naming the file.
@@ -831,10 +727,7 @@ mod tests {
                     })
                 })
                 .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("producer panicked"))
-                .collect()
+            handles.into_iter().map(|h| h.join().expect("producer panicked")).collect()
         });
         for r in results {
             assert!(matches!(r, Err(McapIoError::WriterThread(_))), "{r:?}");

@@ -11,10 +11,7 @@ const MIB: usize = 1024 * 1024;
 fn tiny_queue_blocks_the_caller_and_loses_nothing() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("bp.mcap");
-    let opts = WriterOptions {
-        queue_bytes: MIB,
-        ..WriterOptions::default()
-    };
+    let opts = WriterOptions { queue_bytes: MIB, ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let ch = w.add_channel(simple_spec("/big")).expect("channel");
     let n = 50u32;
@@ -35,11 +32,7 @@ fn tiny_queue_blocks_the_caller_and_loses_nothing() {
             "write #{seq} returned with only {} messages written: no back-pressure",
             stats.messages_written["/big"]
         );
-        assert!(
-            stats.bytes_queued <= (MIB + 64) as u64,
-            "queue holds {} bytes",
-            stats.bytes_queued
-        );
+        assert!(stats.bytes_queued <= (MIB + 64) as u64, "queue holds {} bytes", stats.bytes_queued);
     }
     let stats = w.finish().expect("finish");
     assert_eq!(stats.messages_written["/big"], u64::from(n));
@@ -58,11 +51,7 @@ fn queue_holds_several_small_messages_but_not_more_than_the_bound() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("bp-small.mcap");
     let queue_bytes = 256 * 1024;
-    let opts = WriterOptions {
-        queue_bytes,
-        chunk_size: 256 * 1024,
-        ..WriterOptions::default()
-    };
+    let opts = WriterOptions { queue_bytes, chunk_size: 256 * 1024, ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let ch = w.add_channel(simple_spec("/s")).expect("channel");
     let n = 3000u32;
@@ -80,8 +69,5 @@ fn queue_holds_several_small_messages_but_not_more_than_the_bound() {
     w.finish().expect("finish");
     let (_, got) = read_all(&path);
     assert_eq!(got.len(), n as usize);
-    assert!(got
-        .iter()
-        .enumerate()
-        .all(|(i, m)| m.sequence == i as u32 && m.data == payload(i as u64, 4000)));
+    assert!(got.iter().enumerate().all(|(i, m)| m.sequence == i as u32 && m.data == payload(i as u64, 4000)));
 }

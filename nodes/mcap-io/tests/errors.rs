@@ -5,9 +5,7 @@ mod common;
 use std::{fs, io::ErrorKind};
 
 use common::simple_spec;
-use sonoflow_mcap_io::{
-    recover, ChannelId, McapIoError, McapReader, OutMessage, RecorderWriter, WriterOptions,
-};
+use sonoflow_mcap_io::{recover, ChannelId, McapIoError, McapReader, OutMessage, RecorderWriter, WriterOptions};
 
 #[test]
 fn create_refuses_to_overwrite() {
@@ -18,14 +16,8 @@ fn create_refuses_to_overwrite() {
         Ok(_) => panic!("create overwrote an existing file"),
         Err(e) => e,
     };
-    assert!(
-        matches!(&err, McapIoError::AlreadyExists { path: p } if *p == path),
-        "{err:?}"
-    );
-    assert!(
-        err.to_string().contains(&path.display().to_string()),
-        "{err}"
-    );
+    assert!(matches!(&err, McapIoError::AlreadyExists { path: p } if *p == path), "{err:?}");
+    assert!(err.to_string().contains(&path.display().to_string()), "{err}");
     assert_eq!(fs::read(&path).expect("read"), b"precious");
 }
 
@@ -58,14 +50,8 @@ fn not_an_mcap_file() {
             other => panic!("{name}: expected NotMcap, got {other:?}"),
         }
         let out = dir.path().join(format!("{name}.recovered"));
-        assert!(matches!(
-            recover(&path, &out),
-            Err(McapIoError::NotMcap { .. })
-        ));
-        assert!(
-            !out.exists(),
-            "recover must not create output for bad input"
-        );
+        assert!(matches!(recover(&path, &out), Err(McapIoError::NotMcap { .. })));
+        assert!(!out.exists(), "recover must not create output for bad input");
     }
 }
 
@@ -91,17 +77,8 @@ fn writing_to_an_unknown_channel_fails() {
     let mut w = RecorderWriter::create(&path, WriterOptions::default()).expect("create");
     let ch = w.add_channel(simple_spec("/a")).expect("channel");
     for bad in [ChannelId(0), ChannelId(ch.0 + 1), ChannelId(u16::MAX)] {
-        let r = w.write(OutMessage {
-            channel: bad,
-            sequence: 0,
-            log_time: 0,
-            publish_time: 0,
-            data: vec![1],
-        });
-        assert!(
-            matches!(r, Err(McapIoError::UnknownChannel(id)) if id == bad.0),
-            "{r:?}"
-        );
+        let r = w.write(OutMessage { channel: bad, sequence: 0, log_time: 0, publish_time: 0, data: vec![1] });
+        assert!(matches!(r, Err(McapIoError::UnknownChannel(id)) if id == bad.0), "{r:?}");
     }
     let stats = w.finish().expect("finish");
     assert_eq!(stats.messages_written["/a"], 0);

@@ -48,13 +48,7 @@ fn flush_interval_puts_small_messages_on_disk() {
                 data: data.clone(),
             })
             .expect("write");
-            common::Expected {
-                topic: "/slow".into(),
-                sequence: seq,
-                log_time: t,
-                publish_time: t + 1,
-                data,
-            }
+            common::Expected { topic: "/slow".into(), sequence: seq, log_time: t, publish_time: t + 1, data }
         })
         .collect();
     sleep(Duration::from_millis(600));
@@ -76,10 +70,7 @@ fn without_a_timer_flush_the_open_chunk_stays_in_memory() {
     // Control for the test above: the snapshot only has the messages because of the timer.
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("no-timer.mcap");
-    let opts = WriterOptions {
-        flush_interval: Duration::from_secs(3600),
-        ..WriterOptions::default()
-    };
+    let opts = WriterOptions { flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let ch = w.add_channel(simple_spec("/slow")).expect("channel");
     write_n(&w, ch, "/slow", 5, 200);

@@ -5,9 +5,7 @@ mod common;
 use std::{collections::BTreeMap, fs, time::Duration};
 
 use common::{payload, read_all, simple_spec, Expected};
-use sonoflow_mcap_io::{
-    ChannelSpec, Compression, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions,
-};
+use sonoflow_mcap_io::{ChannelSpec, Compression, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions};
 
 const RF_LEN: usize = 4 * 1024 * 1024;
 const ROUNDS: u64 = 6;
@@ -15,10 +13,7 @@ const ROUNDS: u64 = 6;
 fn round_trip(compression: Compression) {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join(format!("rt-{compression}.mcap"));
-    let opts = WriterOptions {
-        compression,
-        ..WriterOptions::default()
-    };
+    let opts = WriterOptions { compression, ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let rf = w
         .add_channel(ChannelSpec {
@@ -32,9 +27,7 @@ fn round_trip(compression: Compression) {
         .expect("rf channel");
     let status = w.add_channel(simple_spec("/status")).expect("status");
     let mut pose_spec = simple_spec("/pose");
-    pose_spec
-        .metadata
-        .insert("frame".to_string(), "probe".to_string());
+    pose_spec.metadata.insert("frame".to_string(), "probe".to_string());
     let pose = w.add_channel(pose_spec.clone()).expect("pose");
     // Same spec again: same id, no new channel.
     assert_eq!(w.add_channel(pose_spec).expect("pose again"), pose);
@@ -50,14 +43,7 @@ fn round_trip(compression: Compression) {
             publish_time: t + 5,
             data: data.clone(),
         });
-        w.write(OutMessage {
-            channel: ch,
-            sequence: seq,
-            log_time: t,
-            publish_time: t + 5,
-            data,
-        })
-        .expect("write");
+        w.write(OutMessage { channel: ch, sequence: seq, log_time: t, publish_time: t + 5, data }).expect("write");
     };
     for round in 0..ROUNDS {
         let t = round * 1_000_000;
@@ -68,12 +54,8 @@ fn round_trip(compression: Compression) {
         push(&w, pose, "/pose", seq, t + 10, payload(200 + round, 48));
     }
     let config = b"[run]\nseed = 42\n".to_vec();
-    w.attach("config.toml", "application/toml", config.clone())
-        .expect("attach");
-    let run_meta = BTreeMap::from([
-        ("seed".to_string(), "42".to_string()),
-        ("git".to_string(), "abc123".to_string()),
-    ]);
+    w.attach("config.toml", "application/toml", config.clone()).expect("attach");
+    let run_meta = BTreeMap::from([("seed".to_string(), "42".to_string()), ("git".to_string(), "abc123".to_string())]);
     w.metadata("run", run_meta.clone()).expect("metadata");
 
     let stats = w.finish().expect("finish");
@@ -91,21 +73,13 @@ fn round_trip(compression: Compression) {
     assert_eq!(reader.profile(), "sonoflow");
     assert_eq!(got.len(), expected.len());
     for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
-        assert!(
-            e.matches(g),
-            "{compression}: message {i} differs ({} {})",
-            g.topic,
-            g.sequence
-        );
+        assert!(e.matches(g), "{compression}: message {i} differs ({} {})", g.topic, g.sequence);
     }
     let rf_msg = got.iter().find(|m| m.topic == "/rf").expect("rf message");
     assert_eq!(rf_msg.schema_name, "sonoflow.RfFrame");
     assert_eq!(rf_msg.message_encoding, "raw-f32le");
     assert_eq!(rf_msg.channel_metadata["fs_hz"], "40000000");
-    let pose_msg = got
-        .iter()
-        .find(|m| m.topic == "/pose")
-        .expect("pose message");
+    let pose_msg = got.iter().find(|m| m.topic == "/pose").expect("pose message");
     assert_eq!(pose_msg.channel_metadata["frame"], "probe");
 
     let topics = reader.topics();
@@ -116,53 +90,32 @@ fn round_trip(compression: Compression) {
     assert_eq!(topics[0].topic, "/rf");
     assert_eq!(topics[1].schema_name, "bytes");
     assert_eq!(reader.metadata(), vec![("run".to_string(), run_meta)]);
-    assert_eq!(
-        reader.attachments(),
-        vec![(
-            "config.toml".to_string(),
-            "application/toml".to_string(),
-            config
-        )]
-    );
+    assert_eq!(reader.attachments(), vec![("config.toml".to_string(), "application/toml".to_string(), config)]);
 
     // Filters.
     let only_status: Vec<_> = reader
-        .messages(&ReadOptions {
-            topics: Some(vec!["/status".into()]),
-            ..Default::default()
-        })
+        .messages(&ReadOptions { topics: Some(vec!["/status".into()]), ..Default::default() })
         .expect("filtered")
         .collect::<Result<_, _>>()
         .expect("read");
     assert_eq!(only_status.len(), ROUNDS as usize);
     assert!(only_status.iter().all(|m| m.topic == "/status"));
     let window: Vec<_> = reader
-        .messages(&ReadOptions {
-            topics: None,
-            start_time: Some(2_000_000),
-            end_time: Some(4_000_000),
-        })
+        .messages(&ReadOptions { topics: None, start_time: Some(2_000_000), end_time: Some(4_000_000) })
         .expect("window")
         .collect::<Result<_, _>>()
         .expect("read");
     assert_eq!(window.len(), 6);
-    assert!(window
-        .iter()
-        .all(|m| (2_000_000..4_000_000).contains(&m.log_time)));
+    assert!(window.iter().all(|m| (2_000_000..4_000_000).contains(&m.log_time)));
     let none = reader
-        .messages(&ReadOptions {
-            topics: Some(vec!["/does-not-exist".into()]),
-            ..Default::default()
-        })
+        .messages(&ReadOptions { topics: Some(vec!["/does-not-exist".into()]), ..Default::default() })
         .expect("no topic")
         .count();
     assert_eq!(none, 0);
 
     // Cross-check with the mcap crate's own strict readers.
     let bytes = fs::read(&path).expect("read file");
-    let summary = mcap::Summary::read(&bytes)
-        .expect("summary")
-        .expect("has summary");
+    let summary = mcap::Summary::read(&bytes).expect("summary").expect("has summary");
     assert_eq!(summary.schemas.len(), 2, "/status and /pose share a schema");
     assert_eq!(summary.channels.len(), 3);
     let want = match compression {
@@ -172,10 +125,7 @@ fn round_trip(compression: Compression) {
     };
     assert!(summary.chunk_indexes.len() >= ROUNDS as usize);
     assert!(summary.chunk_indexes.iter().all(|c| c.compression == want));
-    let strict = mcap::MessageStream::new(&bytes)
-        .expect("stream")
-        .collect::<Result<Vec<_>, _>>()
-        .expect("strict read");
+    let strict = mcap::MessageStream::new(&bytes).expect("stream").collect::<Result<Vec<_>, _>>().expect("strict read");
     assert_eq!(strict.len(), expected.len());
 }
 
@@ -241,29 +191,15 @@ fn message_larger_than_chunk_size_gets_its_own_chunk() {
     };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let ch = w.add_channel(simple_spec("/x")).expect("channel");
-    for (t, len) in [
-        (1u64, 1024usize),
-        (2, 3 * 1024 * 1024),
-        (3, 1024),
-        (4, 1024),
-    ] {
-        w.write(OutMessage {
-            channel: ch,
-            sequence: t as u32,
-            log_time: t,
-            publish_time: t,
-            data: payload(t, len),
-        })
-        .expect("write");
+    for (t, len) in [(1u64, 1024usize), (2, 3 * 1024 * 1024), (3, 1024), (4, 1024)] {
+        w.write(OutMessage { channel: ch, sequence: t as u32, log_time: t, publish_time: t, data: payload(t, len) })
+            .expect("write");
     }
     w.finish().expect("finish");
     let bytes = fs::read(&path).expect("read");
     let summary = mcap::Summary::read(&bytes).expect("summary").expect("some");
-    let ranges: Vec<(u64, u64)> = summary
-        .chunk_indexes
-        .iter()
-        .map(|c| (c.message_start_time, c.message_end_time))
-        .collect();
+    let ranges: Vec<(u64, u64)> =
+        summary.chunk_indexes.iter().map(|c| (c.message_start_time, c.message_end_time)).collect();
     assert_eq!(ranges, vec![(1, 1), (2, 2), (3, 4)]);
     let big = &summary.chunk_indexes[1];
     assert!(big.uncompressed_size > 3 * 1024 * 1024);
@@ -275,18 +211,9 @@ fn message_larger_than_chunk_size_gets_its_own_chunk() {
 fn several_producer_threads_share_one_writer() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("mt.mcap");
-    let opts = WriterOptions {
-        queue_bytes: 256 * 1024,
-        chunk_size: 64 * 1024,
-        ..WriterOptions::default()
-    };
+    let opts = WriterOptions { queue_bytes: 256 * 1024, chunk_size: 64 * 1024, ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let channels: Vec<_> = (0..4)
-        .map(|i| {
-            w.add_channel(simple_spec(&format!("/t{i}")))
-                .expect("channel")
-        })
-        .collect();
+    let channels: Vec<_> = (0..4).map(|i| w.add_channel(simple_spec(&format!("/t{i}"))).expect("channel")).collect();
     std::thread::scope(|s| {
         for (i, ch) in channels.iter().enumerate() {
             let w = &w;
@@ -313,11 +240,7 @@ fn several_producer_threads_share_one_writer() {
     assert_eq!(got.len(), 2000);
     for i in 0..4u64 {
         let topic = format!("/t{i}");
-        let seqs: Vec<u32> = got
-            .iter()
-            .filter(|m| m.topic == topic)
-            .map(|m| m.sequence)
-            .collect();
+        let seqs: Vec<u32> = got.iter().filter(|m| m.topic == topic).map(|m| m.sequence).collect();
         assert_eq!(seqs, (0..500).collect::<Vec<_>>(), "{topic}");
         for m in got.iter().filter(|m| m.topic == topic) {
             assert_eq!(m.data, payload(i << 32 | u64::from(m.sequence), 3000));
@@ -345,11 +268,7 @@ fn channel_without_schema() {
     let path = dir.path().join("noschema.mcap");
     let mut w = RecorderWriter::create(&path, WriterOptions::default()).expect("create");
     let ch = w
-        .add_channel(ChannelSpec {
-            topic: "/log".into(),
-            message_encoding: "text".into(),
-            ..Default::default()
-        })
+        .add_channel(ChannelSpec { topic: "/log".into(), message_encoding: "text".into(), ..Default::default() })
         .expect("channel");
     let expected = common::write_n(&w, ch, "/log", 3, 10);
     w.finish().expect("finish");
@@ -364,18 +283,11 @@ fn channel_without_schema() {
 
 #[test]
 fn compression_names_and_option_defaults() {
-    for (c, s) in [
-        (Compression::None, "none"),
-        (Compression::Zstd, "zstd"),
-        (Compression::Lz4, "lz4"),
-    ] {
+    for (c, s) in [(Compression::None, "none"), (Compression::Zstd, "zstd"), (Compression::Lz4, "lz4")] {
         assert_eq!(c.to_string(), s);
         assert_eq!(s.parse::<Compression>().expect("parse"), c);
         assert_eq!(serde_json::to_string(&c).expect("ser"), format!("\"{s}\""));
-        assert_eq!(
-            serde_json::from_str::<Compression>(&format!("\"{s}\"")).expect("de"),
-            c
-        );
+        assert_eq!(serde_json::from_str::<Compression>(&format!("\"{s}\"")).expect("de"), c);
     }
     assert!("gzip".parse::<Compression>().is_err());
     assert!(serde_json::from_str::<Compression>("\"Zstd\"").is_err());
@@ -399,17 +311,10 @@ fn reading_a_file_with_messages_outside_chunks() {
         .emit_summary_records(false)
         .create(std::io::BufWriter::new(file))
         .expect("writer");
-    let ch = w
-        .add_channel(0, "/u", "raw", &BTreeMap::new())
-        .expect("channel");
+    let ch = w.add_channel(0, "/u", "raw", &BTreeMap::new()).expect("channel");
     for (i, t) in [5u64, 3, 9, 3, 1].into_iter().enumerate() {
         w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: i as u32,
-                log_time: t,
-                publish_time: t,
-            },
+            &mcap::records::MessageHeader { channel_id: ch, sequence: i as u32, log_time: t, publish_time: t },
             &payload(i as u64, 10),
         )
         .expect("write");

@@ -12,9 +12,7 @@ use std::{
 };
 
 use common::{assert_prefix, payload, read_all, simple_spec, write_n, Expected};
-use sonoflow_mcap_io::{
-    recover, McapIoError, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions,
-};
+use sonoflow_mcap_io::{recover, McapIoError, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions};
 
 /// Checks that `recovered` is a finished file holding exactly `expected` (which it must read
 /// back in order), also by the mcap crate's strict readers.
@@ -23,13 +21,8 @@ fn assert_recovered(recovered: &Path, expected: &[Expected]) {
     assert!(r.is_complete(), "recovered file must be complete");
     assert_eq!(assert_prefix(&got, expected), expected.len());
     let bytes = fs::read(recovered).expect("read recovered");
-    let summary = mcap::Summary::read(&bytes)
-        .expect("summary")
-        .expect("recovered file has a summary");
-    assert_eq!(
-        summary.stats.as_ref().map(|s| s.message_count),
-        Some(expected.len() as u64)
-    );
+    let summary = mcap::Summary::read(&bytes).expect("summary").expect("recovered file has a summary");
+    assert_eq!(summary.stats.as_ref().map(|s| s.message_count), Some(expected.len() as u64));
     let strict = mcap::MessageStream::new(&bytes)
         .expect("stream")
         .collect::<Result<Vec<_>, _>>()
@@ -41,11 +34,8 @@ fn assert_recovered(recovered: &Path, expected: &[Expected]) {
 fn abandoned_writer_leaves_a_readable_prefix() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("abandoned.mcap");
-    let opts = WriterOptions {
-        chunk_size: 64 * 1024,
-        flush_interval: Duration::from_secs(3600),
-        ..WriterOptions::default()
-    };
+    let opts =
+        WriterOptions { chunk_size: 64 * 1024, flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let ch = w.add_channel(simple_spec("/a")).expect("channel");
     let expected = write_n(&w, ch, "/a", 100, 10 * 1024);
@@ -82,11 +72,8 @@ struct Finished {
 fn finished_file() -> Finished {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("full.mcap");
-    let opts = WriterOptions {
-        chunk_size: 64 * 1024,
-        flush_interval: Duration::from_secs(3600),
-        ..WriterOptions::default()
-    };
+    let opts =
+        WriterOptions { chunk_size: 64 * 1024, flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
     let mut w = RecorderWriter::create(&path, opts).expect("create");
     let a = w.add_channel(simple_spec("/a")).expect("a");
     let b = w.add_channel(simple_spec("/b")).expect("b");
@@ -96,8 +83,7 @@ fn finished_file() -> Finished {
     for seq in 0..60u32 {
         if seq == 3 {
             w.metadata("run", run_meta.clone()).expect("metadata");
-            w.attach("config", "text/plain", config.clone())
-                .expect("attach");
+            w.attach("config", "text/plain", config.clone()).expect("attach");
         }
         let (ch, topic) = if seq % 2 == 0 { (a, "/a") } else { (b, "/b") };
         let t = 1000 + u64::from(seq) * 10;
@@ -109,28 +95,13 @@ fn finished_file() -> Finished {
             publish_time: t,
             data: data.clone(),
         });
-        w.write(OutMessage {
-            channel: ch,
-            sequence: seq,
-            log_time: t,
-            publish_time: t,
-            data,
-        })
-        .expect("write");
+        w.write(OutMessage { channel: ch, sequence: seq, log_time: t, publish_time: t, data }).expect("write");
     }
     w.finish().expect("finish");
     let bytes = fs::read(&path).expect("read");
     let summary = mcap::Summary::read(&bytes).expect("summary").expect("some");
     assert!(summary.chunk_indexes.len() >= 10);
-    Finished {
-        _dir: dir,
-        path,
-        expected,
-        bytes,
-        summary,
-        run_meta,
-        config,
-    }
+    Finished { _dir: dir, path, expected, bytes, summary, run_meta, config }
 }
 
 /// Number of messages in the chunks that end at or before `cut`.
@@ -155,11 +126,7 @@ fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize, want_extra
         .expect("messages")
         .collect::<Result<Vec<_>, _>>()
         .unwrap_or_else(|e| panic!("{name}: linear read failed: {e}"));
-    assert_eq!(
-        assert_prefix(&got, &f.expected),
-        want,
-        "{name}: wrong number of messages"
-    );
+    assert_eq!(assert_prefix(&got, &f.expected), want, "{name}: wrong number of messages");
     if want_extras {
         assert_eq!(r.metadata(), vec![("run".to_string(), f.run_meta.clone())]);
         assert_eq!(r.attachments().len(), 1, "{name}");
@@ -174,14 +141,7 @@ fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize, want_extra
     if want_extras {
         let rr = McapReader::open(&out).expect("open recovered");
         assert_eq!(rr.metadata(), vec![("run".to_string(), f.run_meta.clone())]);
-        assert_eq!(
-            rr.attachments(),
-            vec![(
-                "config".to_string(),
-                "text/plain".to_string(),
-                f.config.clone()
-            )]
-        );
+        assert_eq!(rr.attachments(), vec![("config".to_string(), "text/plain".to_string(), f.config.clone())]);
     }
 }
 
@@ -209,13 +169,7 @@ fn truncated_in_the_middle_of_an_earlier_chunk() {
 fn truncated_in_the_summary_or_footer() {
     let f = finished_file();
     let all = f.expected.len();
-    let data_end = f
-        .summary
-        .chunk_indexes
-        .iter()
-        .map(|c| c.chunk_start_offset + c.chunk_length)
-        .max()
-        .expect("chunks");
+    let data_end = f.summary.chunk_indexes.iter().map(|c| c.chunk_start_offset + c.chunk_length).max().expect("chunks");
     let len = f.bytes.len();
     // Somewhere in the summary section, and inside the footer / end magic.
     let summary_cut = (data_end as usize + len) / 2;
@@ -228,13 +182,7 @@ fn truncated_right_after_the_header() {
     let f = finished_file();
     // Magic (8) + the header record: no chunk survives.
     let header_len = 8 + 9 + u64::from_le_bytes(f.bytes[9..17].try_into().expect("len"));
-    check_damaged(
-        &f,
-        "cut-header",
-        &f.bytes[..header_len as usize + 5],
-        0,
-        false,
-    );
+    check_damaged(&f, "cut-header", &f.bytes[..header_len as usize + 5], 0, false);
 }
 
 #[test]
@@ -347,22 +295,13 @@ fn kill_minus_9_loses_at_most_the_flush_interval() {
     let progress = dir.path().join("progress");
     let start = Instant::now();
     let handed_over: u32 = loop {
-        assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "child made no progress"
-        );
-        if let Some(n) = fs::read_to_string(&progress)
-            .ok()
-            .and_then(|s| s.trim().parse::<u32>().ok())
-        {
+        assert!(start.elapsed() < Duration::from_secs(60), "child made no progress");
+        if let Some(n) = fs::read_to_string(&progress).ok().and_then(|s| s.trim().parse::<u32>().ok()) {
             if n >= 200 {
                 break n;
             }
         }
-        assert!(
-            child.0.try_wait().expect("try_wait").is_none(),
-            "child exited early"
-        );
+        assert!(child.0.try_wait().expect("try_wait").is_none(), "child exited early");
         sleep(Duration::from_millis(20));
     };
     // Everything handed over now must be on disk after 10 flush intervals, kill -9 or not.

@@ -57,10 +57,7 @@ type Svc = ipc::Service;
 
 /// Wall clock in UNIX nanoseconds.
 pub fn unix_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0)
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
 }
 
 fn clock_ns(clock: libc::clockid_t) -> u64 {
@@ -110,7 +107,8 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, KitError> {
 pub fn create_node_with(name: &str, handle_signals: bool) -> Result<Node<Svc>, KitError> {
     set_log_level_from_env_or(LogLevel::Error);
     let node_name = NodeName::new(name).map_err(ipc(format!("node name `{name}`")))?;
-    let mode = if handle_signals { SignalHandlingMode::HandleTerminationRequests } else { SignalHandlingMode::Disabled };
+    let mode =
+        if handle_signals { SignalHandlingMode::HandleTerminationRequests } else { SignalHandlingMode::Disabled };
     NodeBuilder::new()
         .name(&node_name)
         .signal_handling_mode(mode)
@@ -254,9 +252,7 @@ impl<M: WireMessage> Output<M> {
         let ctx = format!("handshake on `{}`", self.topic());
         self.publisher.update_connections().map_err(ipc(ctx.clone()))?;
         let mut got = 0usize;
-        self.ready
-            .try_wait(|e| got += e.count as usize)
-            .map_err(ipc(ctx))?;
+        self.ready.try_wait(|e| got += e.count as usize).map_err(ipc(ctx))?;
         self.ready_count += got;
         Ok(self.ready_count >= self.services.qos.expected_subscribers)
     }
@@ -306,7 +302,7 @@ impl<M: WireMessage> Output<M> {
     /// published unchanged apart from the `REPLAYED` flag).
     pub fn publish_raw(&mut self, header: M::Header, payload_bytes: &[u8]) -> Result<(), KitError> {
         let es = std::mem::size_of::<M::Elem>();
-        if es == 0 || payload_bytes.len() % es != 0 {
+        if es == 0 || !payload_bytes.len().is_multiple_of(es) {
             return Err(KitError::Port {
                 port: self.topic().to_string(),
                 detail: format!("payload of {} bytes is not a multiple of the element size {es}", payload_bytes.len()),
@@ -321,9 +317,7 @@ impl<M: WireMessage> Output<M> {
         {
             let dst = sample.payload_mut();
             // SAFETY: MaybeUninit<E> has the layout of E; we write all n·es bytes.
-            let dst_bytes = unsafe {
-                std::slice::from_raw_parts_mut(dst.as_mut_ptr() as *mut u8, n * es)
-            };
+            let dst_bytes = unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr() as *mut u8, n * es) };
             dst_bytes.copy_from_slice(payload_bytes);
         }
         // SAFETY: every byte was written above.
@@ -350,6 +344,12 @@ impl<M: WireMessage> Output<M> {
         Ok(())
     }
 }
+
+/// A received sample of kind `M` (header and payload still in shared memory).
+pub type InSample<M> = Sample<Svc, [<M as WireMessage>::Elem], <M as WireMessage>::Header>;
+
+/// Callback receiving raw (header, payload) bytes.
+pub type BytesFn<'a> = dyn FnMut(&[u8], &[u8]) -> Result<(), KitError> + 'a;
 
 /// A typed input port.
 pub struct Input<M: WireMessage> {
@@ -380,8 +380,7 @@ impl<M: WireMessage> Input<M> {
             .buffer_size(qos.depth.max(1))
             .create()
             .map_err(ipc(ctx.clone()))?;
-        let listener =
-            std::rc::Rc::new(services.data_event.listener_builder().create().map_err(ipc(ctx.clone()))?);
+        let listener = std::rc::Rc::new(services.data_event.listener_builder().create().map_err(ipc(ctx.clone()))?);
         let ready = services.ready_event.notifier_builder().create().map_err(ipc(ctx))?;
         Ok(Self {
             services,
@@ -417,11 +416,8 @@ impl<M: WireMessage> Input<M> {
 
     /// Takes the next message if one is queued. End-of-stream markers set [`Input::eos`] and
     /// are returned too (check [`is_eos`]).
-    pub fn try_receive(&mut self) -> Result<Option<Sample<Svc, [M::Elem], M::Header>>, KitError> {
-        let s = self
-            .subscriber
-            .receive()
-            .map_err(ipc(format!("receiving on `{}`", self.services.qos.topic)))?;
+    pub fn try_receive(&mut self) -> Result<Option<InSample<M>>, KitError> {
+        let s = self.subscriber.receive().map_err(ipc(format!("receiving on `{}`", self.services.qos.topic)))?;
         if let Some(sample) = &s {
             let c = M::common(sample.user_header());
             if c.flags & FLAG_END_OF_STREAM != 0 {
@@ -444,9 +440,7 @@ impl<M: WireMessage> Input<M> {
 
     /// Blocks until a notification arrives on this input or `timeout` passes.
     pub fn wait(&self, timeout: Duration) -> Result<(), KitError> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(ipc(format!("waiting on `{}`", self.services.qos.topic)))?;
+        self.listener.timed_wait(|_| {}, timeout).map_err(ipc(format!("waiting on `{}`", self.services.qos.topic)))?;
         Ok(())
     }
 
@@ -676,10 +670,7 @@ pub trait DynInput: Handshake {
     /// Takes one message and hands `f` its header and payload bytes (still in shared memory).
     /// Returns `None` when the queue is empty, `Some(true)` for an end-of-stream marker (not
     /// passed to `f`), `Some(false)` after `f` ran.
-    fn receive_with(
-        &mut self,
-        f: &mut dyn FnMut(&[u8], &[u8]) -> Result<(), KitError>,
-    ) -> Result<Option<bool>, KitError>;
+    fn receive_with(&mut self, f: &mut BytesFn<'_>) -> Result<Option<bool>, KitError>;
     /// The data-event listener (for a WaitSet).
     fn listener_rc(&self) -> std::rc::Rc<Listener<Svc>>;
     /// (received, gaps, end of stream seen)
@@ -693,10 +684,7 @@ impl<M: WireMessage> DynInput for Input<M> {
     fn topic_name(&self) -> &str {
         self.topic()
     }
-    fn receive_with(
-        &mut self,
-        f: &mut dyn FnMut(&[u8], &[u8]) -> Result<(), KitError>,
-    ) -> Result<Option<bool>, KitError> {
+    fn receive_with(&mut self, f: &mut BytesFn<'_>) -> Result<Option<bool>, KitError> {
         match self.try_receive()? {
             None => Ok(None),
             Some(sample) => {
@@ -742,7 +730,12 @@ impl<M: WireMessage> DynOutput for Output<M> {
         if header.len() != std::mem::size_of::<M::Header>() {
             return Err(KitError::Port {
                 port: self.topic().to_string(),
-                detail: format!("header of {} bytes, {} expects {}", header.len(), M::KIND, std::mem::size_of::<M::Header>()),
+                detail: format!(
+                    "header of {} bytes, {} expects {}",
+                    header.len(),
+                    M::KIND,
+                    std::mem::size_of::<M::Header>()
+                ),
             });
         }
         let mut h: M::Header = bytemuck::pod_read_unaligned(header);

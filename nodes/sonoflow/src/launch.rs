@@ -18,9 +18,9 @@
 //! ```
 
 use crate::kinds::{self, KindSpec, PortDir};
+use serde::{Deserialize, Serialize};
 use sonoflow_messages::MessageKind;
 use sonoflow_node_kit::TopicQos;
-use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -194,9 +194,7 @@ fn set_path(table: &mut toml::Table, path: &[&str], value: toml::Value) -> Resul
         table.insert(first.to_string(), value);
         return Ok(());
     }
-    let entry = table
-        .entry(first.to_string())
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    let entry = table.entry(first.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
     match entry {
         toml::Value::Table(t) => set_path(t, rest, value),
         other => Err(format!("`{first}` is a {}, not a table", other.type_str())),
@@ -235,7 +233,11 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                 Some(n) if n.variants.contains_key(variant) => n.variant = Some(variant.to_string()),
                 Some(n) => errors.push(format!(
                     "--swap {s}: node `{node}` has no variant `{variant}` (variants: {})",
-                    if n.variants.is_empty() { "none".into() } else { n.variants.keys().cloned().collect::<Vec<_>>().join(", ") }
+                    if n.variants.is_empty() {
+                        "none".into()
+                    } else {
+                        n.variants.keys().cloned().collect::<Vec<_>>().join(", ")
+                    }
                 )),
                 None => errors.push(format!("--swap {s}: no node `{node}`")),
             },
@@ -290,7 +292,10 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
         errors.push(format!("graph.name = {:?}: use letters, digits, `-` and `_` only", file.graph.name));
     }
     if !(file.graph.handshake_timeout_s.is_finite() && (0.1..=600.0).contains(&file.graph.handshake_timeout_s)) {
-        errors.push(format!("graph.handshake_timeout_s = {} is out of range: 0.1 ..= 600", file.graph.handshake_timeout_s));
+        errors.push(format!(
+            "graph.handshake_timeout_s = {} is out of range: 0.1 ..= 600",
+            file.graph.handshake_timeout_s
+        ));
     }
     if !(file.graph.stop_grace_s.is_finite() && (0.1..=600.0).contains(&file.graph.stop_grace_s)) {
         errors.push(format!("graph.stop_grace_s = {} is out of range: 0.1 ..= 600", file.graph.stop_grace_s));
@@ -309,7 +314,12 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
             None => errors.push(format!(
                 "topics.{name}.type = {:?} is not a message type (allowed: {})",
                 t.kind,
-                MessageKind::ALL.iter().filter(|k| **k != MessageKind::StageStatsV1).map(|k| k.name()).collect::<Vec<_>>().join(", ")
+                MessageKind::ALL
+                    .iter()
+                    .filter(|k| **k != MessageKind::StageStatsV1)
+                    .map(|k| k.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )),
         }
         if !(1..=(1usize << 28)).contains(&t.max_elements) {
@@ -349,13 +359,19 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                 continue;
             }
             (None, None) => {
-                errors.push(format!("node `{name}`: needs `kind = \"…\"` (built-in: {}) or `exec = \"path\"`", kinds::names().join(", ")));
+                errors.push(format!(
+                    "node `{name}`: needs `kind = \"…\"` (built-in: {}) or `exec = \"path\"`",
+                    kinds::names().join(", ")
+                ));
                 continue;
             }
             (Some(k), None) => match kinds::spec(k) {
                 Some(s) => (Program::Builtin(k.clone()), Some(s)),
                 None => {
-                    errors.push(format!("node `{name}`: kind `{k}` is unknown (built-in: {})", kinds::names().join(", ")));
+                    errors.push(format!(
+                        "node `{name}`: kind `{k}` is unknown (built-in: {})",
+                        kinds::names().join(", ")
+                    ));
                     continue;
                 }
             },
@@ -364,7 +380,10 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                 match p {
                     Some(p) => (Program::Exec(p, n.args.clone()), None),
                     None => {
-                        errors.push(format!("node `{name}`: exec `{e}` not found (relative to {} or on PATH) or not executable", base_dir.display()));
+                        errors.push(format!(
+                            "node `{name}`: exec `{e}` not found (relative to {} or on PATH) or not executable",
+                            base_dir.display()
+                        ));
                         continue;
                     }
                 }
@@ -412,7 +431,9 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                                         if *tk != p.kind {
                                             errors.push(format!(
                                                 "node `{name}` {} `{port}` carries {} but topic `{topic}` is {}",
-                                                dir.word(), p.kind, tk
+                                                dir.word(),
+                                                p.kind,
+                                                tk
                                             ));
                                         }
                                     }
@@ -429,7 +450,12 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                     for p in spec.ports.iter().filter(|p| p.required) {
                         let map = if p.dir == PortDir::In { &inputs } else { &outputs };
                         if !map.contains_key(p.name) {
-                            errors.push(format!("node `{name}` ({}): required {} port `{}` is not wired", spec.name, p.dir.word(), p.name));
+                            errors.push(format!(
+                                "node `{name}` ({}): required {} port `{}` is not wired",
+                                spec.name,
+                                p.dir.word(),
+                                p.name
+                            ));
                         }
                     }
                 }
@@ -440,11 +466,15 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                         Some((_, Some(pk))) => {
                             if let Some(tk) = topic_kinds.get(topic) {
                                 if *tk != pk {
-                                    errors.push(format!("node `{name}` port `{port}` carries {pk} but topic `{topic}` is {tk}"));
+                                    errors.push(format!(
+                                        "node `{name}` port `{port}` carries {pk} but topic `{topic}` is {tk}"
+                                    ));
                                 }
                             }
                         }
-                        Some((k, None)) => errors.push(format!("nodes.{name}.ports.{port} = {k:?} is not a message type")),
+                        Some((k, None)) => {
+                            errors.push(format!("nodes.{name}.ports.{port} = {k:?} is not a message type"))
+                        }
                         None => errors.push(format!(
                             "node `{name}` (exec): port `{port}` needs its type in `ports = {{ {port} = \"…\" }}`"
                         )),
@@ -477,10 +507,16 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
         let p = producers.get(t.as_str()).map(Vec::len).unwrap_or(0);
         let c = consumers.get(t.as_str()).map(Vec::len).unwrap_or(0);
         if p > 1 {
-            errors.push(format!("topic `{t}` has {p} producers ({}): exactly one is allowed", producers[t.as_str()].join(", ")));
+            errors.push(format!(
+                "topic `{t}` has {p} producers ({}): exactly one is allowed",
+                producers[t.as_str()].join(", ")
+            ));
         }
         if p == 0 && c > 0 {
-            errors.push(format!("topic `{t}` is consumed by {} but no node produces it (dangling input)", consumers[t.as_str()].join(", ")));
+            errors.push(format!(
+                "topic `{t}` is consumed by {} but no node produces it (dangling input)",
+                consumers[t.as_str()].join(", ")
+            ));
         }
         if p == 0 && c == 0 {
             warnings.push(format!("topic `{t}` is declared but not used"));
@@ -507,11 +543,8 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
             },
         );
     }
-    let recorders: Vec<&String> = programs
-        .iter()
-        .filter(|(_, (_, s))| s.map(|s| s.dynamic_inputs).unwrap_or(false))
-        .map(|(n, _)| n)
-        .collect();
+    let recorders: Vec<&String> =
+        programs.iter().filter(|(_, (_, s))| s.map(|s| s.dynamic_inputs).unwrap_or(false)).map(|(n, _)| n).collect();
     let n_stat_publishers = programs.len() - recorders.len();
     let stats = if recorders.is_empty() || n_stat_publishers == 0 {
         None
@@ -554,7 +587,11 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                 let full = base_dir.join(p);
                 if !Path::new(p).exists() && !full.exists() {
                     let msg = format!("nodes.{name}.params.path: recording `{p}` does not exist");
-                    if ov.lenient_files { warnings.push(msg) } else { errors.push(msg) }
+                    if ov.lenient_files {
+                        warnings.push(msg)
+                    } else {
+                        errors.push(msg)
+                    }
                 }
             }
         }
@@ -581,7 +618,16 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
         });
     }
     let resolved_toml = toml::to_string_pretty(&file).unwrap_or_default();
-    Ok(ResolvedGraph { graph: file.graph, nodes, topics: topics_qos, stats, resolved_toml, warnings, shm_bytes, base_dir: base_dir.to_path_buf() })
+    Ok(ResolvedGraph {
+        graph: file.graph,
+        nodes,
+        topics: topics_qos,
+        stats,
+        resolved_toml,
+        warnings,
+        shm_bytes,
+        base_dir: base_dir.to_path_buf(),
+    })
 }
 
 fn resolve_exec(e: &str, base_dir: &Path) -> Option<PathBuf> {

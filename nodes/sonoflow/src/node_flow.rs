@@ -121,7 +121,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             kit.stats.messages_out += 1;
             kit.record(at.frame_id, vh.common.t_valid, thread_cpu_ns() - t0)?;
         }
-        if (k as u64 + 1) % step == 0 || k as u64 + 1 == total {
+        if (k as u64 + 1).is_multiple_of(step) || k as u64 + 1 == total {
             kit.progress(k as u64 + 1, total);
         }
     }

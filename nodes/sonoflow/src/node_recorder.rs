@@ -160,9 +160,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     println!("recorder: recording {} topic(s) to {}", rec.len(), path.display());
 
     let listeners: Vec<_> = rec.iter().map(|r| r.input.listener_rc()).collect();
-    let waitset = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("creating the WaitSet: {e:?}"))?;
+    let waitset =
+        WaitSetBuilder::new().create::<ipc::Service>().map_err(|e| anyhow::anyhow!("creating the WaitSet: {e:?}"))?;
     let mut guards = Vec::new();
     for l in &listeners {
         guards.push(waitset.attach_notification(l.as_ref()).map_err(|e| anyhow::anyhow!("WaitSet attach: {e:?}"))?);
@@ -188,16 +187,22 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                         bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<sonoflow_messages::MsgHeaderV1>()]);
                     let mut data = Vec::new();
                     cdr::encode_bytes_into(header, payload.len() / kind.elem_size().max(1), payload, &mut data);
-                    w.write(OutMessage { channel: raw, sequence: c.seq as u32, log_time, publish_time: c.t_pub_ns, data })
-                        .map_err(|e| sonoflow_node_kit::KitError::Port { port: topic.clone(), detail: e.to_string() })?;
+                    w.write(OutMessage {
+                        channel: raw,
+                        sequence: c.seq as u32,
+                        log_time,
+                        publish_time: c.t_pub_ns,
+                        data,
+                    })
+                    .map_err(|e| sonoflow_node_kit::KitError::Port { port: topic.clone(), detail: e.to_string() })?;
                     if want_viz {
                         if let Some(v) = viz::viz(kind, header, payload) {
                             let ch = match viz_ch {
                                 Some(ch) => ch,
                                 None => {
                                     let t = viz::viz_topic(&topic);
-                                    let ch = w
-                                        .add_channel(ChannelSpec {
+                                    let ch =
+                                        w.add_channel(ChannelSpec {
                                             topic: t.clone(),
                                             message_encoding: v.message_encoding.clone(),
                                             schema_name: v.schema_name.clone(),
@@ -205,7 +210,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                                             schema_data: v.schema_data.clone(),
                                             metadata: BTreeMap::new(),
                                         })
-                                        .map_err(|e| sonoflow_node_kit::KitError::Port { port: t.clone(), detail: e.to_string() })?;
+                                        .map_err(|e| {
+                                            sonoflow_node_kit::KitError::Port { port: t.clone(), detail: e.to_string() }
+                                        })?;
                                     vc.insert(t, ch);
                                     viz_ch = Some(ch);
                                     ch
@@ -218,7 +225,10 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                                 publish_time: c.t_pub_ns,
                                 data: v.data,
                             })
-                            .map_err(|e| sonoflow_node_kit::KitError::Port { port: topic.clone(), detail: e.to_string() })?;
+                            .map_err(|e| sonoflow_node_kit::KitError::Port {
+                                port: topic.clone(),
+                                detail: e.to_string(),
+                            })?;
                         }
                     }
                     Ok(())
@@ -249,7 +259,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         if terminated {
             break;
         }
-        match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::from_millis(500)) {
+        match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::from_millis(500))
+        {
             Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => terminated = true,
             Ok(_) => {}
             Err(e) => anyhow::bail!("WaitSet: {e:?}"),
@@ -272,10 +283,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         if !r.count.end_of_stream || gaps > 0 || r.count.written != received {
             complete = false;
         }
-        md.insert(
-            r.input.topic_name().to_string(),
-            serde_json::to_string(&r.count).unwrap_or_default(),
-        );
+        md.insert(r.input.topic_name().to_string(), serde_json::to_string(&r.count).unwrap_or_default());
         summary.push(format!(
             "{} {}/{}{}{}",
             r.input.topic_name(),

@@ -61,8 +61,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     if !reader.is_complete() {
         eprintln!("replay: {} is unfinished (no summary); replaying every complete chunk", p.path);
     }
-    let recorded: BTreeMap<String, String> =
-        reader.topics().into_iter().map(|t| (t.topic, t.schema_name)).collect();
+    let recorded: BTreeMap<String, String> = reader.topics().into_iter().map(|t| (t.topic, t.schema_name)).collect();
     let outputs_cfg = kit.cfg.outputs.clone();
     let mut outs: BTreeMap<String, (MessageKind, Box<dyn DynOutput>)> = BTreeMap::new();
     for (rec_topic, qos) in &outputs_cfg {
@@ -95,14 +94,19 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         .map(|m| m.log_time)
         .unwrap_or(0);
     let start_time = first + (p.start_offset_s * 1e9) as u64;
-    let total = reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
+    let total =
+        reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
     let mut sent = 0u64;
     let mut last_t = 0.0;
     let mut lap = 0u32;
     'outer: loop {
         let t_start = Instant::now();
         let mut first_of_lap = true;
-        for m in reader.messages(&ReadOptions { topics: Some(topics.clone()), start_time: Some(start_time), end_time: None })? {
+        for m in reader.messages(&ReadOptions {
+            topics: Some(topics.clone()),
+            start_time: Some(start_time),
+            end_time: None,
+        })? {
             let m = m?;
             if kit.check_termination().is_err() {
                 break 'outer;
@@ -130,7 +134,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             kit.stats.messages_out += 1;
             kit.stats.bytes_out += payload.len() as u64;
             kit.record(c.frame_id, c.t_valid, thread_cpu_ns() - t0)?;
-            if total > 0 && (sent % (total / 20).max(1) == 0) {
+            if total > 0 && sent.is_multiple_of((total / 20).max(1)) {
                 kit.progress(sent, total * p.loops.max(1) as u64);
             }
         }

@@ -11,8 +11,7 @@ use sonoflow_node_kit::{thread_cpu_ns, Kit};
 
 /// Deterministic test value of sample `i` of frame `frame` (uniform in [-0.5, 0.5)).
 pub fn pattern(seed: u64, frame: u64, i: u64) -> f32 {
-    let mut x = seed
-        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
         ^ frame.wrapping_mul(0xD1B5_4A32_D192_ED03)
         ^ i.wrapping_mul(0x94D0_49BB_1331_11EB);
     x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -225,10 +224,8 @@ pub fn run_checker(mut kit: Kit) -> anyhow::Result<()> {
         let mut bad = None;
         if data.len() != n {
             bad = Some(format!("frame {frame}: {} samples, header says {n}", data.len()));
-        } else if let Some((i, v)) = data
-            .iter()
-            .enumerate()
-            .find(|(i, v)| v.to_bits() != (pattern(p.seed, frame, *i as u64) * p.gain).to_bits())
+        } else if let Some((i, v)) =
+            data.iter().enumerate().find(|(i, v)| v.to_bits() != (pattern(p.seed, frame, *i as u64) * p.gain).to_bits())
         {
             bad = Some(format!(
                 "frame {frame} sample {i}: got {v}, expected {}",

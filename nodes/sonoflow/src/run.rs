@@ -271,8 +271,10 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
             if p.status.is_none() {
                 if let Ok(Some(st)) = p.child.try_wait() {
                     p.status = Some(st);
-                    let requested = p.stopping;
-                    if !st.success() && !(requested && st.code().is_some()) {
+                    // A node that exits with an error code after we asked it to stop is not a
+                    // failure (e.g. a checker that saw fewer frames); a signal death always is.
+                    let tolerated = st.success() || (p.stopping && st.code().is_some());
+                    if !tolerated {
                         let tail = if p.last_err.is_empty() {
                             String::new()
                         } else {
@@ -324,7 +326,8 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
             } else if phase == 2 && t.elapsed() > grace {
                 shutdown = Some((Instant::now(), 3));
                 for p in procs.iter_mut().filter(|p| p.status.is_none()) {
-                    let msg = format!("node `{}` did not stop within {:.1} s and was killed", p.name, grace.as_secs_f64());
+                    let msg =
+                        format!("node `{}` did not stop within {:.1} s and was killed", p.name, grace.as_secs_f64());
                     eprintln!("sonoflow: ERROR {msg}");
                     failures.push(msg);
                     terminate(p, libc::SIGKILL);
@@ -469,7 +472,8 @@ pub fn default_out_dir(graph: &str) -> PathBuf {
 
 /// A run id unique on this machine (iceoryx2 names are machine-global).
 pub fn new_run_id(graph: &str) -> String {
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos()).unwrap_or(0);
+    let nanos =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos()).unwrap_or(0);
     let g: String = graph.chars().filter(|c| c.is_ascii_alphanumeric() || *c == '-').take(24).collect();
     format!("{g}-{}-{:06}", std::process::id(), nanos / 1000)
 }

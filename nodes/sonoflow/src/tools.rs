@@ -6,7 +6,12 @@ use std::path::Path;
 /// Prints a summary of a recording.
 pub fn inspect(file: &Path) -> anyhow::Result<i32> {
     let r = McapReader::open(file)?;
-    println!("{}: {} ({} bytes)", file.display(), if r.is_complete() { "complete MCAP" } else { "UNFINISHED MCAP (run `sonoflow recover`)" }, r.file_len());
+    println!(
+        "{}: {} ({} bytes)",
+        file.display(),
+        if r.is_complete() { "complete MCAP" } else { "UNFINISHED MCAP (run `sonoflow recover`)" },
+        r.file_len()
+    );
     println!("topics:");
     for t in r.topics() {
         println!(

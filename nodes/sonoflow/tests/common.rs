@@ -1,7 +1,7 @@
 //! Helpers for the cross-process tests: every run gets its own service prefix (run id) and
 //! output folder, and a guard kills the launcher (whose children get SIGTERM through their
 //! parent-death signal) if a test fails midway.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used)]
 //! Crashes and bad input: kill -9 of a producer and of the recorder mid-run, and malformed
 //! launch files.
 
@@ -8,10 +9,12 @@ use std::process::Command;
 
 fn count(path: &std::path::Path, topic: &str) -> usize {
     let r = McapReader::open(path).unwrap();
-    r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap())
-        .count()
+    let mut n = 0;
+    for m in r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None }).unwrap() {
+        m.unwrap();
+        n += 1;
+    }
+    n
 }
 
 /// A clean small run: proves no stale resource from a killed run gets in the way.
@@ -40,7 +43,8 @@ fn kill9_of_a_producer_is_reported_and_the_recording_is_finished() {
     assert!(n > 0, "frames recorded before the kill");
     let stats = r.metadata().into_iter().find(|(n, _)| n == "recording_stats").unwrap().1;
     assert_eq!(stats["complete"], "false");
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["status"], "failed");
     next_run_is_clean();
 }
@@ -100,10 +104,14 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
         (&GOOD.replace("[graph]\n", "[graph]\ncolour = 1\n"), &[], &["unknown field `colour`"]),
         // dangling input + type mismatch + unknown topic
         (
-            &GOOD.replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
+            &GOOD
+                .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
                 .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV1\", max_elements = 10 }\n"),
             &[],
-            &["carries RfFrameV1 but topic `iq` is IqFrameV1", "topic `iq` is consumed by checker but no node produces it"],
+            &[
+                "carries RfFrameV1 but topic `iq` is IqFrameV1",
+                "topic `iq` is consumed by checker but no node produces it",
+            ],
         ),
         // out-of-range params, several at once
         (
@@ -113,7 +121,11 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
         ),
         // unknown kind, unknown port
         (&GOOD.replace("kind = \"checker\"", "kind = \"chekcer\""), &[], &["kind `chekcer` is unknown"]),
-        (&GOOD.replace("outputs = { rf = \"rf\" }", "outputs = { rf = \"rf\", iq = \"rf\" }"), &[], &["no output port `iq`"]),
+        (
+            &GOOD.replace("outputs = { rf = \"rf\" }", "outputs = { rf = \"rf\", iq = \"rf\" }"),
+            &[],
+            &["no output port `iq`"],
+        ),
         // two producers
         (
             &format!("{GOOD}\n[nodes.source2]\nkind = \"test-source\"\noutputs = {{ rf = \"rf\" }}\n"),
@@ -125,7 +137,11 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
         (GOOD, &["--set", "nosuch.x=1"], &["no node `nosuch`"]),
         (GOOD, &["--swap", "source=fast"], &["node `source` has no variant `fast`"]),
         // exec that does not exist, TOML syntax error
-        (&GOOD.replace("kind = \"checker\"", "exec = \"./no-such-binary\""), &[], &["exec `./no-such-binary` not found"]),
+        (
+            &GOOD.replace("kind = \"checker\"", "exec = \"./no-such-binary\""),
+            &[],
+            &["exec `./no-such-binary` not found"],
+        ),
         ("[graph\nname = 1", &[], &["TOML parse error"]),
     ];
     for (text, extra, needles) in cases {

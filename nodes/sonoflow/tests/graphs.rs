@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used)]
 //! Whole graphs of real processes over shared memory (no mocks).
 
 mod common;
@@ -50,7 +51,8 @@ fn four_mib_frames_through_three_processes_and_an_external_node() {
         assert_eq!(data[i].to_bits(), (pattern(7, 5, i as u64) * 2.0).to_bits());
     }
     assert_eq!(stats(&rec).get("complete").map(String::as_str), Some("true"));
-    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["status"], "ok");
     assert_eq!(report["nodes"].as_array().unwrap().len(), 4);
 }
@@ -156,7 +158,10 @@ fn quickstart_recording_matches_the_library() {
         assert_eq!(ps.len(), flow.particles().len());
         let lib = flow.particles();
         for (i, q) in ps.iter().enumerate().step_by(37) {
-            assert_eq!((q.id, q.x, q.z, q.vx, q.vz, q.amplitude), (lib.id[i], lib.x[i], lib.z[i], lib.vx[i], lib.vz[i], lib.amplitude[i]));
+            assert_eq!(
+                (q.id, q.x, q.z, q.vx, q.vz, q.amplitude),
+                (lib.id[i], lib.x[i], lib.z[i], lib.vx[i], lib.vz[i], lib.amplitude[i])
+            );
         }
     }
     let (h, planes) = cdr::decode::<VectorField>(&truth[1]).unwrap();

@@ -3,9 +3,7 @@
 
 use std::{collections::BTreeMap, path::Path};
 
-use sonoflow_mcap_io::{
-    ChannelId, ChannelSpec, InMessage, McapReader, OutMessage, ReadOptions, RecorderWriter,
-};
+use sonoflow_mcap_io::{ChannelId, ChannelSpec, InMessage, McapReader, OutMessage, ReadOptions, RecorderWriter};
 
 /// Deterministic pseudo-random bytes (xorshift64*), different for every (seed, len).
 pub fn payload(seed: u64, len: usize) -> Vec<u8> {
@@ -57,13 +55,7 @@ pub fn simple_spec(topic: &str) -> ChannelSpec {
 
 /// Writes `n` messages of `len` bytes on `channel` (topic `topic`), sequence 0.., log time
 /// 1000 * (seq + 1).
-pub fn write_n(
-    w: &RecorderWriter,
-    channel: ChannelId,
-    topic: &str,
-    n: u32,
-    len: usize,
-) -> Vec<Expected> {
+pub fn write_n(w: &RecorderWriter, channel: ChannelId, topic: &str, n: u32, len: usize) -> Vec<Expected> {
     let mut expected = Vec::new();
     for seq in 0..n {
         let data = payload(u64::from(seq) + 7, len);
@@ -75,36 +67,21 @@ pub fn write_n(
             publish_time: log_time + 1,
             data: data.clone(),
         });
-        w.write(OutMessage {
-            channel,
-            sequence: seq,
-            log_time,
-            publish_time: log_time + 1,
-            data,
-        })
-        .expect("write");
+        w.write(OutMessage { channel, sequence: seq, log_time, publish_time: log_time + 1, data }).expect("write");
     }
     expected
 }
 
 pub fn read_all(path: &Path) -> (McapReader, Vec<InMessage>) {
     let r = McapReader::open(path).expect("open");
-    let msgs = r
-        .messages(&ReadOptions::default())
-        .expect("messages")
-        .collect::<Result<Vec<_>, _>>()
-        .expect("read messages");
+    let msgs =
+        r.messages(&ReadOptions::default()).expect("messages").collect::<Result<Vec<_>, _>>().expect("read messages");
     (r, msgs)
 }
 
 /// Asserts that `got` is exactly a prefix of `expected` and returns its length.
 pub fn assert_prefix(got: &[InMessage], expected: &[Expected]) -> usize {
-    assert!(
-        got.len() <= expected.len(),
-        "read {} messages, wrote {}",
-        got.len(),
-        expected.len()
-    );
+    assert!(got.len() <= expected.len(), "read {} messages, wrote {}", got.len(), expected.len());
     for (i, (g, e)) in got.iter().zip(expected).enumerate() {
         assert!(
             e.matches(g),
