@@ -662,3 +662,78 @@ pub fn shm_available() -> Option<u64> {
     let rc = unsafe { libc::statvfs(path.as_ptr(), &mut st) };
     (rc == 0).then(|| st.f_bavail as u64 * st.f_frsize as u64)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const G: &str = r#"
+[graph]
+name = "g"
+[topics]
+rf = { type = "RfFrameV1", max_elements = 1024 }
+out = { type = "RfFrameV1", max_elements = 1024 }
+[nodes.src]
+kind = "test-source"
+outputs = { rf = "rf" }
+params = { n_frames = 2, n_channels = 4, n_samples = 16 }
+[nodes.stage]
+kind = "gain"
+inputs = { rf_in = "rf" }
+outputs = { rf_out = "out" }
+params = { gain = 3.0 }
+[nodes.stage.variants.half]
+params = { gain = 0.5 }
+[nodes.rec]
+kind = "recorder"
+"#;
+
+    fn res(ov: Overrides) -> Result<ResolvedGraph, Vec<String>> {
+        resolve(toml::from_str(G).unwrap(), Path::new("."), &ov)
+    }
+
+    #[test]
+    fn qos_counts_consumers_and_recorder() {
+        let g = res(Overrides::default()).unwrap();
+        // rf: gain + recorder; out: recorder only.
+        assert_eq!(g.topics["rf"].expected_subscribers, 2);
+        assert_eq!(g.topics["out"].expected_subscribers, 1);
+        let st = g.stats.as_ref().unwrap();
+        assert_eq!((st.max_publishers, st.max_subscribers), (2, 1));
+        let rec = g.nodes.iter().find(|n| n.name == "rec").unwrap();
+        assert!(rec.is_recorder);
+        assert_eq!(rec.inputs.keys().cloned().collect::<Vec<_>>(), vec!["out", "rf"]);
+        // Shared memory: per topic (subscribers × (depth + 2) + 1) slots of the max payload.
+        let per = |subs: u64| (subs * 6 + 1) * (1024 * 4 + 1168 + 64);
+        assert!(g.shm_bytes >= per(2) + per(1));
+    }
+
+    #[test]
+    fn set_and_swap_change_params() {
+        let g = res(Overrides { set: vec!["src.n_frames=7".into(), "stage.gain=1.25".into()], ..Default::default() })
+            .unwrap();
+        let p = |n: &str| g.nodes.iter().find(|x| x.name == n).unwrap().params.clone();
+        assert_eq!(p("src")["n_frames"], 7);
+        assert_eq!(p("stage")["gain"], 1.25);
+        let g = res(Overrides { swap: vec!["stage=half".into()], ..Default::default() }).unwrap();
+        assert_eq!(g.nodes.iter().find(|x| x.name == "stage").unwrap().params["gain"], 0.5);
+        // Strings, arrays and nested tables.
+        assert_eq!(parse_value("abc"), toml::Value::String("abc".into()));
+        assert_eq!(parse_value("[1, 2]"), toml::Value::Array(vec![1.into(), 2.into()]));
+        let mut t = toml::Table::new();
+        set_path(&mut t, &["a", "b"], 3.into()).unwrap();
+        assert_eq!(t["a"]["b"], toml::Value::Integer(3));
+        assert!(set_path(&mut t, &["a", "b", "c"], 1.into()).is_err());
+    }
+
+    #[test]
+    fn every_problem_is_reported_at_once() {
+        let errs = res(Overrides {
+            set: vec!["src.n_channels=0".into(), "stage.gain=inf".into(), "nosuch.x=1".into()],
+            swap: vec!["stage=double".into()],
+            lenient_files: false,
+        })
+        .unwrap_err();
+        assert_eq!(errs.len(), 4, "{errs:#?}");
+    }
+}

@@ -163,3 +163,26 @@ fn out_of_range_parameters_stop_the_run_before_any_process_starts() {
     assert!(err.contains("flow.diameter"), "{err}");
     assert!(!dir.path().join("logs").exists(), "nothing was started");
 }
+
+/// Ctrl-C (SIGINT to the launcher): the graph stops in order, the recording is a complete,
+/// finished file, the report says `interrupted`, exit code 130.
+#[test]
+fn ctrl_c_stops_the_graph_and_finishes_the_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut l = Launcher::start("tests/launch/kill.toml", dir.path(), &[]);
+    l.wait_line("progress");
+    // SAFETY: kill(2) on our own child.
+    unsafe {
+        libc::kill(l.child.id() as i32, libc::SIGINT);
+    }
+    let (code, log) = l.finish();
+    assert_eq!(code, 130, "{log}");
+    let rec = dir.path().join("recording.mcap");
+    let r = McapReader::open(&rec).unwrap();
+    assert!(r.is_complete(), "{log}");
+    assert!(count(&rec, "rf") > 0);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["status"], "interrupted");
+    assert!(report["failures"].as_array().unwrap().is_empty(), "{report}");
+}

@@ -117,7 +117,7 @@ fn python_mcap_reads_the_recording_and_numpy_decodes_rf() {
     });
     let exp_path = dir.path().join("expect.json");
     std::fs::write(&exp_path, serde_json::to_vec(&expect).unwrap()).unwrap();
-    let py = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+    let py = python_with_mcap();
     let out = std::process::Command::new(py)
         .arg(root().join("tests/python/read_recording.py"))
         .arg(dir.path().join("recording.mcap"))
@@ -173,4 +173,36 @@ fn quickstart_recording_matches_the_library() {
     // The Foxglove pictures are there too.
     assert_eq!(read_topic(&rec, "viz/particles").len(), 64);
     assert!(std::fs::read_to_string(dir.path().join("report.md")).unwrap().contains("| flow |"));
+}
+
+/// A Python interpreter with `mcap`, `mcap-ros2-support` and `numpy`: `$SONOFLOW_PYTHON`, else
+/// `python3` if it has them, else a private venv under `target/` created on first use.
+fn python_with_mcap() -> std::path::PathBuf {
+    if let Some(p) = std::env::var_os("SONOFLOW_PYTHON") {
+        return p.into();
+    }
+    let has = |py: &std::path::Path| {
+        std::process::Command::new(py)
+            .args(["-c", "import mcap, mcap_ros2, numpy"])
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false)
+    };
+    let sys = std::path::PathBuf::from("python3");
+    if has(&sys) {
+        return sys;
+    }
+    let venv = root().join("target/pyenv");
+    let py = venv.join("bin/python");
+    if !has(&py) {
+        let ok = std::process::Command::new("python3").args(["-m", "venv"]).arg(&venv).status().unwrap().success();
+        assert!(ok, "python3 -m venv failed");
+        let ok = std::process::Command::new(&py)
+            .args(["-m", "pip", "install", "--quiet", "mcap", "mcap-ros2-support", "numpy"])
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "pip install mcap mcap-ros2-support numpy failed");
+    }
+    py
 }
