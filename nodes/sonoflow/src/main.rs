@@ -56,6 +56,9 @@ enum Cmd {
         #[command(subcommand)]
         what: sonoflow::bench::BenchCmd,
     },
+    /// Receiving process of `sonoflow bench transport`.
+    #[command(hide = true)]
+    BenchPeer(sonoflow::bench::PeerArgs),
 }
 
 fn main() {
@@ -116,8 +119,9 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             Ok(0)
         }
         Cmd::Node { kind } => {
-            let spec = sonoflow::kinds::spec(&kind)
-                .ok_or_else(|| anyhow::anyhow!("unknown node kind `{kind}` (built-in: {})", sonoflow::kinds::names().join(", ")))?;
+            let spec = sonoflow::kinds::spec(&kind).ok_or_else(|| {
+                anyhow::anyhow!("unknown node kind `{kind}` (built-in: {})", sonoflow::kinds::names().join(", "))
+            })?;
             let kit = sonoflow_node_kit::Kit::from_env()?;
             match (spec.run)(kit) {
                 Ok(()) => Ok(0),
@@ -135,6 +139,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             Ok(0)
         }
         Cmd::Bench { what } => sonoflow::bench::run(what),
+        Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }
 }
 
