@@ -143,7 +143,12 @@ struct Shared {
     counts: Mutex<Vec<u64>>,
     bytes_written: AtomicU64,
     file_bytes: AtomicU64,
+    /// Message buffers handed back by the writer thread for reuse (see [`RecorderWriter::buffer`]).
+    pool: Mutex<Vec<Vec<u8>>>,
 }
+
+/// At most this many buffers are kept for reuse.
+const POOL_BUFFERS: usize = 16;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
@@ -203,6 +208,7 @@ impl RecorderWriter {
             counts: Mutex::new(Vec::new()),
             bytes_written: AtomicU64::new(0),
             file_bytes: AtomicU64::new(0),
+            pool: Mutex::new(Vec::new()),
         });
         let sink = FileSink { file, pos: 0, fail_at, shared: shared.clone() };
         let writer = mcap_write_options(&opts).create(sink).map_err(|e| mcap_error(path, e))?;
@@ -277,6 +283,20 @@ impl RecorderWriter {
             time: now_ns(),
             cost,
         })
+    }
+
+    /// An empty buffer with at least `capacity` bytes reserved, reused from messages already
+    /// written when possible (fill it and pass it as [`OutMessage::data`]).
+    pub fn buffer(&self, capacity: usize) -> Vec<u8> {
+        let mut pool = lock(&self.shared.pool);
+        let mut buf = match pool.iter().position(|b| b.capacity() >= capacity) {
+            Some(i) => pool.swap_remove(i),
+            None => pool.pop().unwrap_or_default(),
+        };
+        drop(pool);
+        buf.clear();
+        buf.reserve(capacity);
+        buf
     }
 
     /// Queues a metadata record (a named string map).
@@ -586,7 +606,16 @@ impl WriterThread {
                     counts[id] += 1;
                 }
                 self.shared.bytes_written.fetch_add(msg.data.len() as u64, Ordering::Relaxed);
-                drop(msg);
+                // Hand the buffer back for reuse: re-faulting fresh pages for every large message
+                // is what limits a recorder on a VM that returns freed memory to the host.
+                let mut buf = msg.data;
+                buf.clear();
+                {
+                    let mut pool = lock(&self.shared.pool);
+                    if pool.len() < POOL_BUFFERS {
+                        pool.push(buf);
+                    }
+                }
                 self.shared.release(cost);
             }
             Command::Attach { name, media_type, data, time, cost } => {

@@ -71,3 +71,37 @@ fn queue_holds_several_small_messages_but_not_more_than_the_bound() {
     assert_eq!(got.len(), n as usize);
     assert!(got.iter().enumerate().all(|(i, m)| m.sequence == i as u32 && m.data == payload(i as u64, 4000)));
 }
+
+/// Buffers come back from the writer thread and are reused, with their capacity.
+#[test]
+fn written_buffers_are_reused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("pool.mcap");
+    let mut w = sonoflow_mcap_io::RecorderWriter::create(&path, sonoflow_mcap_io::WriterOptions::default()).unwrap();
+    let ch = w
+        .add_channel(sonoflow_mcap_io::ChannelSpec {
+            topic: "t".into(),
+            message_encoding: "raw".into(),
+            schema_name: String::new(),
+            schema_encoding: String::new(),
+            schema_data: Vec::new(),
+            metadata: Default::default(),
+        })
+        .unwrap();
+    let mut data = w.buffer(1 << 20);
+    data.resize(1 << 20, 7);
+    let ptr = data.as_ptr();
+    w.write(sonoflow_mcap_io::OutMessage { channel: ch, sequence: 0, log_time: 0, publish_time: 0, data }).unwrap();
+    // Wait until the writer thread has handed it back.
+    let mut again = Vec::new();
+    for _ in 0..200 {
+        again = w.buffer(1 << 20);
+        if again.as_ptr() == ptr {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert_eq!(again.as_ptr(), ptr, "the same allocation comes back");
+    assert!(again.is_empty() && again.capacity() >= 1 << 20);
+    w.finish().unwrap();
+}

@@ -185,7 +185,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                     let log_time = unix_ns();
                     let c: sonoflow_messages::MsgHeaderV1 =
                         bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<sonoflow_messages::MsgHeaderV1>()]);
-                    let mut data = Vec::new();
+                    let mut data = w.buffer(8 + header.len() + payload.len());
                     cdr::encode_bytes_into(header, payload.len() / kind.elem_size().max(1), payload, &mut data);
                     w.write(OutMessage {
                         channel: raw,
