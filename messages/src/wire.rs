@@ -67,7 +67,13 @@ wire_struct! {
         pub dt: f64,
         /// Bounding box x_min, x_max, z_min, z_max (m).
         pub bbox: [f32; 4],
-        pub reserved: [u32; 4],
+        /// Packet index of the acquisition this snapshot is for.
+        pub packet: u32,
+        /// Frame index within the packet.
+        pub frame_in_packet: u32,
+        /// Frames per packet of the acquisition schedule (0 = unknown).
+        pub packet_size: u32,
+        pub reserved: u32,
     }
 }
 

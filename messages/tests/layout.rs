@@ -43,6 +43,8 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(RfFrameHeaderV1, n_samples), 124);
     assert_eq!(offset_of!(RfFrameHeaderV1, tx_delays), 144);
     assert_eq!(offset_of!(ParticleSnapshotHeaderV1, n_particles), 64);
+    assert_eq!(offset_of!(ParticleSnapshotHeaderV1, packet), 96);
+    assert_eq!(offset_of!(ParticleSnapshotHeaderV1, packet_size), 104);
     assert_eq!(offset_of!(ParticleV1, x), 8);
     assert_eq!(offset_of!(ParticleV1, amplitude), 24);
     assert_eq!(offset_of!(IqFrameHeaderV1, grid), 64);

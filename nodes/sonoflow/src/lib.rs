@@ -10,6 +10,7 @@ pub mod node_recorder;
 pub mod node_replay;
 pub mod node_test;
 pub mod nodeutil;
+pub mod npy;
 pub mod report;
 pub mod run;
 pub mod tools;

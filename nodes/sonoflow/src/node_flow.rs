@@ -71,6 +71,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             n_particles: n as u32,
             n_fluid: n as u32,
             bbox: [xmin, xmax, zmin, zmax],
+            packet: at.packet,
+            frame_in_packet: at.frame_in_packet,
+            packet_size: params.schedule.packet_size,
             ..Default::default()
         };
         h.common.frame_id = at.frame_id;
