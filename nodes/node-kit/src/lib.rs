@@ -289,6 +289,47 @@ impl<M: WireMessage> Output<M> {
         Ok(())
     }
 
+    /// Loans `n` zero-initialised elements in shared memory and lets `fill` compute into them
+    /// (for library kernels that take `&mut [T]`); `fill` may also finish the header (e.g. set
+    /// `compute_ns`). If `fill` fails, nothing is sent and its error is returned inside `Ok`.
+    pub fn publish_init<F, E>(&mut self, n: usize, header: M::Header, fill: F) -> Result<Result<(), E>, KitError>
+    where
+        F: FnOnce(&mut [M::Elem], &mut M::Header) -> Result<(), E>,
+    {
+        if n > self.max_elements() {
+            return Err(KitError::TooLarge { topic: self.topic().to_string(), len: n, max: self.max_elements() });
+        }
+        let mut header = header;
+        let ctx = format!("publishing on `{}`", self.services.qos.topic);
+        let mut sample = self.publisher.loan_slice_uninit(n).map_err(ipc(ctx.clone()))?;
+        {
+            let dst = sample.payload_mut();
+            for d in dst.iter_mut() {
+                d.write(M::Elem::default());
+            }
+            // SAFETY: every element was initialised just above.
+            let init = unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr() as *mut M::Elem, dst.len()) };
+            if let Err(e) = fill(init, &mut header) {
+                return Ok(Err(e));
+            }
+        }
+        // SAFETY: initialised above.
+        let mut sample = unsafe { sample.assume_init() };
+        {
+            let c = M::common_mut(&mut header);
+            c.seq = self.seq;
+            c.t_pub_ns = unix_ns();
+            c.source_id = self.source_id;
+        }
+        *sample.user_header_mut() = header;
+        sample.send().map_err(ipc(ctx.clone()))?;
+        self.notifier.notify().map_err(ipc(ctx))?;
+        self.seq += 1;
+        self.sent += 1;
+        self.bytes += (n * std::mem::size_of::<M::Elem>()) as u64;
+        Ok(Ok(()))
+    }
+
     /// Publishes a copy of `payload` (one memcpy into shared memory).
     pub fn publish_copy(&mut self, header: M::Header, payload: &[M::Elem]) -> Result<(), KitError> {
         self.publish_in_place(payload.len(), header, |dst| {

@@ -73,6 +73,15 @@ static KINDS: &[KindSpec] = &[
         run: crate::node_flow::run,
     },
     KindSpec {
+        name: "simus",
+        about: "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
+        ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_simus::validate,
+        run: crate::node_simus::run,
+    },
+    KindSpec {
         name: "recorder",
         about: "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
         ports: &[],

@@ -51,6 +51,8 @@ enum Cmd {
     Recover { input: PathBuf, output: PathBuf },
     /// Remove shared-memory resources left by killed processes.
     Clean,
+    /// SIMUS batch tool: scatterers + MUST parameters → RF (.npy) and a JSON sidecar.
+    Simus(sonoflow::tool_simus::SimusArgs),
     /// Benchmarks (write a Markdown table).
     Bench {
         #[command(subcommand)]
@@ -138,6 +140,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             println!("removed the resources of {n} dead node(s)");
             Ok(0)
         }
+        Cmd::Simus(a) => sonoflow::tool_simus::run(&a),
         Cmd::Bench { what } => sonoflow::bench::run(what),
         Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }

@@ -1,0 +1,172 @@
+//! Benchmark of the paper scene (Shahriari & Garcia 2018): 128-element 5 MHz probe, one 0° plane
+//! wave, N scatterers (default 26 000) uniform in a 40 × 40 mm box from 10 mm depth, Gaussian
+//! amplitudes, fixed seed.
+//!
+//! ```text
+//! cargo run --release -p sonoflow-simus --example simus_bench -- [--scatterers N] [--frames F]
+//!     [--threads T] [--accuracy fast|exact] [--reanchor K] [--block B] [--portable]
+//!     [--seed S] [--write DIR]
+//! ```
+//! Prints seconds per frame (median of F frames after one warm-up frame) and GFLOP/s counted as
+//! in ultrasound-anchors §4.1: `(6M + 2(M−1) + 8 + 8)` flop per (scatterer, element, bin) — M
+//! phasor updates, the sub-element sum, the transmit and the receive complex MACs (30 for M = 2).
+//! `--write DIR` saves the scene (`x.npy`, `z.npy`, `rc.npy`, float32), the RF (`rf.npy`, float32,
+//! PyMUST's (n_samples, n_elements) layout) and `rust.json` (timings, plan) for
+//! `bench/simus/side_by_side.py`.
+
+use std::io::Write;
+use std::time::Instant;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use sonoflow_simus::{Accuracy, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
+
+fn write_npy(path: &std::path::Path, shape: &[usize], data: &[f32]) -> std::io::Result<()> {
+    let shape_txt = match shape {
+        [n] => format!("({n},)"),
+        _ => format!("({})", shape.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")),
+    };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_txt}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+    f.write_all(b"\x93NUMPY\x01\x00")?;
+    f.write_all(&(header.len() as u16).to_le_bytes())?;
+    f.write_all(header.as_bytes())?;
+    for v in data {
+        f.write_all(&v.to_le_bytes())?;
+    }
+    f.flush()
+}
+
+struct Args {
+    n: usize,
+    frames: usize,
+    threads: Option<usize>,
+    exact: bool,
+    reanchor: u32,
+    block: u32,
+    portable: bool,
+    seed: u64,
+    write: Option<std::path::PathBuf>,
+}
+
+fn parse() -> Result<Args, String> {
+    let mut a = Args {
+        n: 26_000,
+        frames: 3,
+        threads: None,
+        exact: false,
+        reanchor: 64,
+        block: 256,
+        portable: false,
+        seed: 2018,
+        write: None,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(k) = it.next() {
+        let mut val = || it.next().ok_or(format!("{k} needs a value"));
+        match k.as_str() {
+            "--scatterers" => a.n = val()?.parse().map_err(|e| format!("{e}"))?,
+            "--frames" => a.frames = val()?.parse().map_err(|e| format!("{e}"))?,
+            "--threads" => a.threads = Some(val()?.parse().map_err(|e| format!("{e}"))?),
+            "--accuracy" => a.exact = val()? == "exact",
+            "--reanchor" => a.reanchor = val()?.parse().map_err(|e| format!("{e}"))?,
+            "--block" => a.block = val()?.parse().map_err(|e| format!("{e}"))?,
+            "--portable" => a.portable = true,
+            "--seed" => a.seed = val()?.parse().map_err(|e| format!("{e}"))?,
+            "--write" => a.write = Some(val()?.into()),
+            "--help" | "-h" => return Err("see the doc comment of examples/simus_bench.rs".into()),
+            _ => return Err(format!("unknown argument {k}")),
+        }
+    }
+    Ok(a)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let a = parse()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(a.seed);
+    let mut scat = Scatterers::default();
+    for _ in 0..a.n {
+        let x = rng.gen_range(-20e-3f32..20e-3);
+        let z = rng.gen_range(10e-3f32..50e-3);
+        let rc: f32 = rng.sample(StandardNormal);
+        scat.push(x, z, rc);
+    }
+    let probe = Probe::paper_5mhz();
+    let medium = Medium::default();
+    let accuracy =
+        if a.exact { Accuracy::Exact } else { Accuracy::Fast { reanchor_every: a.reanchor, scatterer_block: a.block } };
+    let options = SimusOptions { accuracy, threads: a.threads, simd: !a.portable, ..SimusOptions::default() };
+    let mut simus = Simus::new(probe.clone(), medium.clone(), options)?;
+    let tx = Transmit::plane_wave(&probe, medium.c, 0.0)?;
+    let plan = simus.plan(&scat, &tx)?;
+    let mut rf = vec![0f32; probe.n_elements * plan.n_samples];
+    let t = Instant::now();
+    simus.simulate_into(&scat, &tx, &plan, &mut rf)?;
+    let first = t.elapsed().as_secs_f64();
+    let mut times = Vec::new();
+    for _ in 0..a.frames {
+        let t = Instant::now();
+        simus.simulate_into(&scat, &tx, &plan, &mut rf)?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    let per_frame = if times.is_empty() { first } else { times[times.len() / 2] };
+    let m = simus.sub_elements() as f64;
+    let flop_per = 6.0 * m + 2.0 * (m - 1.0) + 16.0;
+    let gflop = a.n as f64 * probe.n_elements as f64 * plan.n_bins() as f64 * flop_per * 1e-9;
+    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    println!(
+        "scene: {} scatterers, {} elements, M = {}, {} bins ({}..={} of {}), df = {:.1} Hz, {} samples",
+        a.n,
+        probe.n_elements,
+        simus.sub_elements(),
+        plan.n_bins(),
+        plan.band_first,
+        plan.band_last,
+        plan.n_freq,
+        plan.df,
+        plan.n_samples
+    );
+    println!(
+        "kernel: {} ({}), threads: {threads}, first frame {first:.3} s",
+        simus.kernel_name(),
+        if a.exact { "exact".to_string() } else { format!("fast, reanchor {} block {}", a.reanchor, a.block) }
+    );
+    println!(
+        "s/frame: {per_frame:.4}  ({} frames: {:?})\nmodel flops: {gflop:.1} GFLOP/frame -> {:.1} GFLOP/s",
+        times.len(),
+        times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>(),
+        gflop / per_frame
+    );
+    if let Some(dir) = a.write {
+        std::fs::create_dir_all(&dir)?;
+        write_npy(&dir.join("x.npy"), &[a.n], &scat.x)?;
+        write_npy(&dir.join("z.npy"), &[a.n], &scat.z)?;
+        write_npy(&dir.join("rc.npy"), &[a.n], &scat.rc)?;
+        let (ns, ne) = (plan.n_samples, probe.n_elements);
+        let mut sm = vec![0f32; ns * ne];
+        for e in 0..ne {
+            for k in 0..ns {
+                sm[k * ne + e] = rf[e * ns + k];
+            }
+        }
+        write_npy(&dir.join("rf.npy"), &[ns, ne], &sm)?;
+        let json = format!(
+            "{{\"seconds_per_frame\": {per_frame}, \"first_frame_seconds\": {first}, \"threads\": {threads}, \
+             \"kernel\": \"{}\", \"gflop_per_frame\": {gflop}, \"n_freq\": {}, \"band_first\": {}, \
+             \"band_last\": {}, \"n_samples\": {}}}\n",
+            simus.kernel_name(),
+            plan.n_freq,
+            plan.band_first,
+            plan.band_last,
+            plan.n_samples
+        );
+        std::fs::write(dir.join("rust.json"), json)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,162 @@
+//! Per-(scatterer, sub-element) geometry of MUST's PFIELD (pymust-notes §5.3–5.6), shared by
+//! the transmit and the receive path (reciprocity: one Green's function per
+//! element–scatterer–frequency, paper 1 eq. 16–17).
+//!
+//! Each element of width W is split into M sub-elements of width W/M (M = `ceil(W/λmin)`,
+//! `λmin = c/(fc(1 + bandwidth/200))`) at `x_e − W/2 + W/(2M) + m W/M`. For sub-element m of
+//! element e and a scatterer at (x, z):
+//!
+//! * `r = max(|(x, z) − (x_em, 0)|, λ/2)` (λ = c/fc): 2-D spreading `1/√r`, clamped near the face;
+//! * `sin θ = (dx + ε)/(d + ε)` (ε = 2^−23, MUST), obliquity `cos θ` (soft), 1 (rigid),
+//!   `cos θ/(cos θ + α)` (numeric baffle), replaced by 1.1921e-7 where |θ| = π/2;
+//! * directivity `sinc(k W/(2M) sin θ)` at k = k(fc) (MUST default) or at every frequency;
+//! * per path and frequency f: `exp(−α_Np(f) r + i 2π f r / c)`, `α_Np = att/8.69 · f[MHz] · 100` /m.
+//!
+//! The phasor of sub-element m is `amp · exp((−β + i 2π/c) f r)` with
+//! `amp = obliquity · directivity / √r / M` (the 1/M makes the sum over m MUST's mean).
+//!
+//! Layout of every per-scatterer array: `[scatterer][chunk of 16 elements][sub-element][lane]`.
+
+use crate::kernel::{L, V};
+use crate::math::{exp_nonpos, sinc_eps, sincos_turns};
+use crate::probe::Baffle;
+
+/// f32 machine epsilon used by PFIELD in the angle formula.
+const EPS32: f64 = 1.192_092_895_507_812_5e-7;
+/// `utils.eps('single')`: obliquity where |θ| ≥ π/2.
+const OBLI_FLOOR: f64 = 1.1921e-7;
+
+/// Array geometry and model constants derived once from probe, medium and options.
+#[derive(Clone, Debug)]
+pub(crate) struct ArrayGeom {
+    /// Real elements.
+    pub n_el: usize,
+    /// Elements padded to a multiple of the SIMD width (padding has amplitude 0).
+    pub e_pad: usize,
+    /// Sub-elements per element.
+    pub m: usize,
+    /// Element centres, padded (padding at x = 0).
+    pub xe: Vec<f64>,
+    /// Sub-element offsets from the element centre.
+    pub xi: Vec<f64>,
+    /// Element width (m).
+    pub width: f64,
+    /// r clamp λ/2 (m).
+    pub r_min: f64,
+    /// `k(fc)·(W/M)/2` (directivity at fc).
+    pub kc_half_seg: f64,
+    /// `(2π/c)·(W/M)/2` (directivity at any f: x = this·f·sin θ).
+    pub half_seg_over_c: f64,
+    /// Obliquity model.
+    pub baffle: Baffle,
+    /// Directivity at every frequency.
+    pub ffd: bool,
+    /// 1/c (s/m): the phase in turns is `f·r/c`.
+    pub inv_c: f64,
+    /// Attenuation in neper per (Hz·m): `att/8.69 · 1e-6 · 1e2`.
+    pub beta: f64,
+}
+
+/// Geometry of one block of scatterers (padded to a multiple of the receive group size with
+/// silent scatterers).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BlockGeom {
+    /// Scatterers in this block, padding included.
+    pub n_s: usize,
+    /// Path length r (m), clamped.
+    pub r: Vec<f64>,
+    /// Amplitude without the frequency-dependent terms (0 for padding).
+    pub amp: Vec<f64>,
+    /// For full-frequency directivity: `|(2π/c)(W/M)/2 · sin θ|` so that the directivity is
+    /// `sinc_eps(dirb · f)`; empty otherwise.
+    pub dirb: Vec<f64>,
+    /// Scatterer amplitude, 0 where z < 0 (not insonified, MUST) and for padding.
+    pub rc: Vec<f64>,
+    /// f32 steppers `E = exp((−β + 2πi/c) df r)`, one vector per (scatterer, chunk, m).
+    pub e_re: Vec<V>,
+    pub e_im: Vec<V>,
+}
+
+impl BlockGeom {
+    /// Resizes for `n_s` scatterers (keeps the allocation).
+    pub fn resize(&mut self, n_s: usize, geom: &ArrayGeom) {
+        let n = n_s * geom.m * geom.e_pad;
+        self.n_s = n_s;
+        self.r.resize(n, 0.0);
+        self.amp.resize(n, 0.0);
+        self.dirb.resize(if geom.ffd { n } else { 0 }, 0.0);
+        self.rc.resize(n_s, 0.0);
+        self.e_re.resize(n / L, V::default());
+        self.e_im.resize(n / L, V::default());
+    }
+}
+
+/// The slices of one scatterer in a [`BlockGeom`].
+pub(crate) struct ScattererGeom<'a> {
+    pub r: &'a mut [f64],
+    pub amp: &'a mut [f64],
+    pub dirb: &'a mut [f64],
+    pub e_re: &'a mut [V],
+    pub e_im: &'a mut [V],
+}
+
+impl ArrayGeom {
+    /// Fills one scatterer's geometry and steppers (`df` = frequency step). `silent` scatterers
+    /// (padding) get amplitude 0. Branch-free inner loops: the compiler vectorises them in the
+    /// SIMD builds of [`crate::simd::Simd::setup`].
+    #[inline(always)]
+    pub fn scatterer(&self, x: f32, z: f32, df: f64, silent: bool, out: ScattererGeom<'_>) {
+        let (x, z) = (f64::from(x), f64::from(z));
+        let inv_m = if silent { 0.0 } else { 1.0 / self.m as f64 };
+        // obliquity = (a1 cos + a0) / (b1 cos + b0)
+        let (a1, a0, b1, b0) = match self.baffle {
+            Baffle::Soft => (1.0, 0.0, 0.0, 1.0),
+            Baffle::Rigid => (0.0, 1.0, 0.0, 1.0),
+            Baffle::Impedance(a) => (1.0, 0.0, 1.0, a),
+        };
+        let (ffd, kc, hs, r_min) = (self.ffd, self.kc_half_seg, self.half_seg_over_c, self.r_min);
+        let nc = self.e_pad / L;
+        for c in 0..nc {
+            for m in 0..self.m {
+                let base = (c * self.m + m) * L;
+                let xm = x - self.xi[m];
+                let xe = &self.xe[c * L..(c + 1) * L];
+                let (r, amp) = (&mut out.r[base..base + L], &mut out.amp[base..base + L]);
+                let mut sin_t = [0f64; L];
+                for l in 0..L {
+                    let dx = xm - xe[l];
+                    let d = (dx * dx + z * z).sqrt();
+                    let rr = d.max(r_min);
+                    let s = ((dx + EPS32) / (d + EPS32)).clamp(-1.0, 1.0);
+                    let cos = ((1.0 - s) * (1.0 + s)).sqrt();
+                    let obli = (a1 * cos + a0) / (b1 * cos + b0);
+                    let obli = if s.abs() >= 1.0 { OBLI_FLOOR } else { obli };
+                    let dir = if ffd { 1.0 } else { sinc_eps(kc * s) };
+                    let pad = if c * L + l < self.n_el { inv_m } else { 0.0 };
+                    r[l] = rr;
+                    amp[l] = obli * dir / rr.sqrt() * pad;
+                    sin_t[l] = s;
+                }
+                if ffd {
+                    for l in 0..L {
+                        out.dirb[base + l] = (hs * sin_t[l]).abs();
+                    }
+                }
+                let (er, ei) = (&mut out.e_re[c * self.m + m], &mut out.e_im[c * self.m + m]);
+                for l in 0..L {
+                    let (re, im) = self.phasor(1.0, r[l], df);
+                    er.0[l] = re as f32;
+                    ei.0[l] = im as f32;
+                }
+            }
+        }
+    }
+
+    /// Exact phasor `amp·exp((−β + 2πi/c) f r)` (without full-frequency directivity).
+    #[inline(always)]
+    pub fn phasor(&self, amp: f64, r: f64, f: f64) -> (f64, f64) {
+        let (s, c) = sincos_turns(f * r * self.inv_c);
+        let a = amp * exp_nonpos(-self.beta * f * r);
+        (a * c, a * s)
+    }
+}

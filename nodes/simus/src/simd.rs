@@ -1,0 +1,434 @@
+//! 16-lane f32 vectors for the fast kernel, in three builds chosen at run time — AVX-512 + FMA,
+//! AVX2 + FMA, and a portable array version without FMA (the scalar twin the tests compare
+//! against) — so no `target-cpu=native` is needed at build time.
+
+use std::ops::Range;
+
+use crate::kernel::{accumulate, Scratch, Tables, L, V};
+use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
+
+/// The vector operations the kernel needs. `mul_add(a, b, c) = a·b + c`,
+/// `neg_mul_add(a, b, c) = c − a·b` (fused where the build has FMA).
+pub(crate) trait Lanes: Copy {
+    fn zero() -> Self;
+    fn splat(x: f32) -> Self;
+    fn load(v: &V) -> Self;
+    fn store(self, v: &mut V);
+    fn add(self, b: Self) -> Self;
+    fn sub(self, b: Self) -> Self;
+    fn mul(self, b: Self) -> Self;
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    fn neg_mul_add(self, b: Self, c: Self) -> Self;
+    /// Sum of the 16 lanes in a fixed order (pairwise tree).
+    fn hsum(self) -> f32;
+    /// Lane-wise maximum.
+    fn max(self, b: Self) -> Self;
+    /// `self · 2^n` for integral `n` in [−126, 127].
+    fn scalef(self, n: Self) -> Self;
+    /// `t − round(t)` with `t = r[l]·s` evaluated in f64, rounded to f32 (16 entries of `r`).
+    fn frac_turns(r: &[f64], s: f64) -> Self;
+    /// `r[l]·s` evaluated in f64, rounded to f32 (16 entries of `r`).
+    fn scaled(r: &[f64], s: f64) -> Self;
+}
+
+/// Portable f64 helpers shared by the builds.
+#[inline(always)]
+fn frac_turns_f64(t: f64) -> f32 {
+    const MAGIC64: f64 = 6_755_399_441_055_744.0;
+    (t - ((t + MAGIC64) - MAGIC64)) as f32
+}
+
+/// Portable build: plain arrays, separate multiply and add.
+#[derive(Clone, Copy)]
+pub(crate) struct Portable([f32; L]);
+
+impl Portable {
+    #[inline(always)]
+    fn map2(self, b: Self, f: impl Fn(f32, f32) -> f32) -> Self {
+        let mut o = [0f32; L];
+        for l in 0..L {
+            o[l] = f(self.0[l], b.0[l]);
+        }
+        Portable(o)
+    }
+}
+
+impl Lanes for Portable {
+    #[inline(always)]
+    fn zero() -> Self {
+        Portable([0.0; L])
+    }
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        Portable([x; L])
+    }
+    #[inline(always)]
+    fn load(v: &V) -> Self {
+        Portable(v.0)
+    }
+    #[inline(always)]
+    fn store(self, v: &mut V) {
+        v.0 = self.0;
+    }
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        self.map2(b, |x, y| x + y)
+    }
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        self.map2(b, |x, y| x - y)
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        self.map2(b, |x, y| x * y)
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        let mut o = [0f32; L];
+        for l in 0..L {
+            o[l] = self.0[l] * b.0[l] + c.0[l];
+        }
+        Portable(o)
+    }
+    #[inline(always)]
+    fn neg_mul_add(self, b: Self, c: Self) -> Self {
+        let mut o = [0f32; L];
+        for l in 0..L {
+            o[l] = c.0[l] - self.0[l] * b.0[l];
+        }
+        Portable(o)
+    }
+    #[inline(always)]
+    fn hsum(self) -> f32 {
+        let v = self.0;
+        let mut a = [0f32; 8];
+        for i in 0..8 {
+            a[i] = v[i] + v[i + 8];
+        }
+        let b = [a[0] + a[4], a[1] + a[5], a[2] + a[6], a[3] + a[7]];
+        let c = [b[0] + b[2], b[1] + b[3]];
+        c[0] + c[1]
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        self.map2(b, f32::max)
+    }
+    #[inline(always)]
+    fn scalef(self, n: Self) -> Self {
+        self.map2(n, |x, n| x * f32::from_bits((((n as i32) + 127) as u32) << 23))
+    }
+    #[inline(always)]
+    fn frac_turns(r: &[f64], s: f64) -> Self {
+        let mut o = [0f32; L];
+        for l in 0..L {
+            o[l] = frac_turns_f64(r[l] * s);
+        }
+        Portable(o)
+    }
+    #[inline(always)]
+    fn scaled(r: &[f64], s: f64) -> Self {
+        let mut o = [0f32; L];
+        for l in 0..L {
+            o[l] = (r[l] * s) as f32;
+        }
+        Portable(o)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use super::*;
+    use std::arch::x86_64::*;
+
+    /// AVX-512 build: one `__m512`.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx512(__m512);
+
+    // SAFETY (every `unsafe` block below): these methods are only reached through
+    // `Simd::accumulate` after run-time detection of AVX-512F/VL/DQ/BW and FMA, and are inlined
+    // into functions compiled with those features; `V` is 64-byte aligned with 16 f32.
+    impl Lanes for Avx512 {
+        #[inline(always)]
+        fn zero() -> Self {
+            Avx512(unsafe { _mm512_setzero_ps() })
+        }
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx512(unsafe { _mm512_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn load(v: &V) -> Self {
+            Avx512(unsafe { _mm512_load_ps(v.0.as_ptr()) })
+        }
+        #[inline(always)]
+        fn store(self, v: &mut V) {
+            unsafe { _mm512_store_ps(v.0.as_mut_ptr(), self.0) }
+        }
+        #[inline(always)]
+        fn add(self, b: Self) -> Self {
+            Avx512(unsafe { _mm512_add_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn sub(self, b: Self) -> Self {
+            Avx512(unsafe { _mm512_sub_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn mul(self, b: Self) -> Self {
+            Avx512(unsafe { _mm512_mul_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx512(unsafe { _mm512_fmadd_ps(self.0, b.0, c.0) })
+        }
+        #[inline(always)]
+        fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            Avx512(unsafe { _mm512_fnmadd_ps(self.0, b.0, c.0) })
+        }
+        #[inline(always)]
+        fn hsum(self) -> f32 {
+            unsafe {
+                let lo = _mm512_castps512_ps256(self.0);
+                let hi = _mm512_extractf32x8_ps::<1>(self.0);
+                let a = _mm256_add_ps(lo, hi); // lanes i + i+8
+                let b = _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps::<1>(a)); // + i+4
+                let c = _mm_add_ps(b, _mm_movehl_ps(b, b)); // [b0+b2, b1+b3]
+                let d = _mm_add_ss(c, _mm_shuffle_ps::<1>(c, c));
+                _mm_cvtss_f32(d)
+            }
+        }
+        #[inline(always)]
+        fn max(self, b: Self) -> Self {
+            Avx512(unsafe { _mm512_max_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn scalef(self, n: Self) -> Self {
+            Avx512(unsafe { _mm512_scalef_ps(self.0, n.0) })
+        }
+        #[inline(always)]
+        fn frac_turns(r: &[f64], s: f64) -> Self {
+            assert!(r.len() >= L);
+            unsafe {
+                let sv = _mm512_set1_pd(s);
+                let half = |p: *const f64| {
+                    let t = _mm512_mul_pd(_mm512_loadu_pd(p), sv);
+                    let q = _mm512_roundscale_pd::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(t);
+                    _mm512_cvtpd_ps(_mm512_sub_pd(t, q))
+                };
+                let lo = half(r.as_ptr());
+                let hi = half(r.as_ptr().add(8));
+                Avx512(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo), hi))
+            }
+        }
+        #[inline(always)]
+        fn scaled(r: &[f64], s: f64) -> Self {
+            assert!(r.len() >= L);
+            unsafe {
+                let sv = _mm512_set1_pd(s);
+                let lo = _mm512_cvtpd_ps(_mm512_mul_pd(_mm512_loadu_pd(r.as_ptr()), sv));
+                let hi = _mm512_cvtpd_ps(_mm512_mul_pd(_mm512_loadu_pd(r.as_ptr().add(8)), sv));
+                Avx512(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo), hi))
+            }
+        }
+    }
+
+    /// AVX2 build: two `__m256`.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2(__m256, __m256);
+
+    // SAFETY: as for `Avx512`, with AVX2 and FMA detected.
+    impl Lanes for Avx2 {
+        #[inline(always)]
+        fn zero() -> Self {
+            unsafe { Avx2(_mm256_setzero_ps(), _mm256_setzero_ps()) }
+        }
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            unsafe { Avx2(_mm256_set1_ps(x), _mm256_set1_ps(x)) }
+        }
+        #[inline(always)]
+        fn load(v: &V) -> Self {
+            unsafe { Avx2(_mm256_load_ps(v.0.as_ptr()), _mm256_load_ps(v.0.as_ptr().add(8))) }
+        }
+        #[inline(always)]
+        fn store(self, v: &mut V) {
+            unsafe {
+                _mm256_store_ps(v.0.as_mut_ptr(), self.0);
+                _mm256_store_ps(v.0.as_mut_ptr().add(8), self.1);
+            }
+        }
+        #[inline(always)]
+        fn add(self, b: Self) -> Self {
+            unsafe { Avx2(_mm256_add_ps(self.0, b.0), _mm256_add_ps(self.1, b.1)) }
+        }
+        #[inline(always)]
+        fn sub(self, b: Self) -> Self {
+            unsafe { Avx2(_mm256_sub_ps(self.0, b.0), _mm256_sub_ps(self.1, b.1)) }
+        }
+        #[inline(always)]
+        fn mul(self, b: Self) -> Self {
+            unsafe { Avx2(_mm256_mul_ps(self.0, b.0), _mm256_mul_ps(self.1, b.1)) }
+        }
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            unsafe { Avx2(_mm256_fmadd_ps(self.0, b.0, c.0), _mm256_fmadd_ps(self.1, b.1, c.1)) }
+        }
+        #[inline(always)]
+        fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            unsafe { Avx2(_mm256_fnmadd_ps(self.0, b.0, c.0), _mm256_fnmadd_ps(self.1, b.1, c.1)) }
+        }
+        #[inline(always)]
+        fn hsum(self) -> f32 {
+            unsafe {
+                let a = _mm256_add_ps(self.0, self.1);
+                let b = _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps::<1>(a));
+                let c = _mm_add_ps(b, _mm_movehl_ps(b, b));
+                let d = _mm_add_ss(c, _mm_shuffle_ps::<1>(c, c));
+                _mm_cvtss_f32(d)
+            }
+        }
+        #[inline(always)]
+        fn max(self, b: Self) -> Self {
+            unsafe { Avx2(_mm256_max_ps(self.0, b.0), _mm256_max_ps(self.1, b.1)) }
+        }
+        #[inline(always)]
+        fn scalef(self, n: Self) -> Self {
+            unsafe {
+                let f = |x: __m256, n: __m256| {
+                    let e = _mm256_slli_epi32::<23>(_mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127)));
+                    _mm256_mul_ps(x, _mm256_castsi256_ps(e))
+                };
+                Avx2(f(self.0, n.0), f(self.1, n.1))
+            }
+        }
+        #[inline(always)]
+        fn frac_turns(r: &[f64], s: f64) -> Self {
+            assert!(r.len() >= L);
+            unsafe {
+                let sv = _mm256_set1_pd(s);
+                let q = |p: *const f64| {
+                    let t = _mm256_mul_pd(_mm256_loadu_pd(p), sv);
+                    let q = _mm256_round_pd::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(t);
+                    _mm256_cvtpd_ps(_mm256_sub_pd(t, q))
+                };
+                let p = r.as_ptr();
+                Avx2(_mm256_set_m128(q(p.add(4)), q(p)), _mm256_set_m128(q(p.add(12)), q(p.add(8))))
+            }
+        }
+        #[inline(always)]
+        fn scaled(r: &[f64], s: f64) -> Self {
+            assert!(r.len() >= L);
+            unsafe {
+                let sv = _mm256_set1_pd(s);
+                let q = |p: *const f64| _mm256_cvtpd_ps(_mm256_mul_pd(_mm256_loadu_pd(p), sv));
+                let p = r.as_ptr();
+                Avx2(_mm256_set_m128(q(p.add(4)), q(p)), _mm256_set_m128(q(p.add(12)), q(p.add(8))))
+            }
+        }
+    }
+
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+    pub(super) fn run_avx512(
+        geom: &ArrayGeom,
+        blk: &BlockGeom,
+                tab: &Tables,
+        bins: Range<usize>,
+        sc: &mut Scratch,
+    ) {
+        accumulate::<Avx512>(geom, blk, tab, bins, sc)
+    }
+
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+    pub(super) fn setup_avx512(geom: &ArrayGeom, x: f32, z: f32, df: f64, silent: bool, out: ScattererGeom<'_>) {
+        geom.scatterer(x, z, df, silent, out)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn setup_avx2(geom: &ArrayGeom, x: f32, z: f32, df: f64, silent: bool, out: ScattererGeom<'_>) {
+        geom.scatterer(x, z, df, silent, out)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn run_avx2(
+        geom: &ArrayGeom,
+        blk: &BlockGeom,
+                tab: &Tables,
+        bins: Range<usize>,
+        sc: &mut Scratch,
+    ) {
+        accumulate::<Avx2>(geom, blk, tab, bins, sc)
+    }
+}
+
+/// Which build of the kernel runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Simd {
+    /// x86-64 with AVX-512F/VL/DQ/BW and FMA.
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+    /// x86-64 with AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    /// Baseline target, separate multiply and add (the scalar twin).
+    Portable,
+}
+
+impl Simd {
+    /// The best build this CPU supports, or `Portable` when `enable` is false.
+    pub fn detect(enable: bool) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if enable {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx512bw") && has!("fma") {
+                return Simd::Avx512;
+            }
+            if has!("avx2") && has!("fma") {
+                return Simd::Avx2;
+            }
+        }
+        let _ = enable;
+        Simd::Portable
+    }
+
+    /// Short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => "avx512",
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => "avx2",
+            Simd::Portable => "portable",
+        }
+    }
+
+    /// Runs [`ArrayGeom::scatterer`] with this build (the compiler vectorises it for the target).
+    pub fn setup(self, geom: &ArrayGeom, x: f32, z: f32, df: f64, silent: bool, out: ScattererGeom<'_>) {
+        match self {
+            // SAFETY: as in `accumulate` below.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { x86::setup_avx512(geom, x, z, df, silent, out) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { x86::setup_avx2(geom, x, z, df, silent, out) },
+            Simd::Portable => geom.scatterer(x, z, df, silent, out),
+        }
+    }
+
+    /// Runs [`accumulate`] with this build.
+    pub fn accumulate(
+        self,
+        geom: &ArrayGeom,
+        blk: &BlockGeom,
+                tab: &Tables,
+        bins: Range<usize>,
+        sc: &mut Scratch,
+    ) {
+        match self {
+            // SAFETY: `detect` returns these variants only after checking, on the running CPU,
+            // every feature the functions are compiled with.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { x86::run_avx512(geom, blk, tab, bins, sc) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { x86::run_avx2(geom, blk, tab, bins, sc) },
+            Simd::Portable => accumulate::<Portable>(geom, blk, tab, bins, sc),
+        }
+    }
+}

@@ -1,0 +1,482 @@
+//! The SIMUS engine (MUST `simus`, paper 1 eq. 14–18): scatterers + transmit → RF per element.
+//!
+//! Per frequency bin k of the plan's band (pymust-notes §5.7):
+//! `SPECT_e(k) = df·W · P(ω_k) H(ω_k)² Σ_s RC_s [Σ_e' D_e'(k) R_se'(k)] R_se(k)`,
+//! then `RF_e = irfft(conj(SPECT_e), n_fft)[..n_samples]` (numpy normalisation 1/n_fft), then
+//! optionally PyMUST's small-value zeroing. The work is split into fixed scatterer blocks
+//! (sequential, memory bounded) and fixed ranges of bins (parallel): every bin's value is produced
+//! by the same operations in the same order whatever the thread count, so the output bits do not
+//! depend on it.
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use realfft::num_complex::Complex;
+use realfft::{ComplexToReal, RealFftPlanner};
+
+use crate::error::{Result, SimusError};
+use crate::exact::{accumulate_exact, Tables64};
+use crate::grid::{FrequencyPlan, PlanInputs};
+use crate::kernel::{Scratch, Tables, G, L, V};
+use crate::params::{Accuracy, Medium, PlanMode, SimusOptions};
+use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
+use crate::probe::Probe;
+use crate::pulse::PulseModel;
+use crate::scatterers::ScattererSlices;
+use crate::simd::Simd;
+use crate::transmit::Transmit;
+
+/// RF of one transmit, element-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RfFrame {
+    /// `data[e * n_samples + k]` = element e, sample k (at `t0 + k/fs`).
+    pub data: Vec<f32>,
+    /// Elements.
+    pub n_elements: usize,
+    /// Samples per element.
+    pub n_samples: usize,
+    /// Sampling frequency (Hz).
+    pub fs: f64,
+    /// Time of sample 0 (s).
+    pub t0: f64,
+    /// The frequency plan used.
+    pub plan: FrequencyPlan,
+}
+
+impl RfFrame {
+    /// The RF of element `e`.
+    pub fn element(&self, e: usize) -> &[f32] {
+        &self.data[e * self.n_samples..(e + 1) * self.n_samples]
+    }
+}
+
+/// One parallel unit: a fixed range of band bins and its accumulators.
+#[derive(Debug, Default)]
+struct Task {
+    bins: std::ops::Range<usize>,
+    sc: Scratch,
+    /// f64 accumulator `[bin][re, im][e_pad]`.
+    u: Vec<f64>,
+    rbuf: Vec<f64>,
+}
+
+#[derive(Default)]
+struct Workspace {
+    blk: BlockGeom,
+    tab: Tables,
+    tab64: Tables64,
+    tasks: Vec<Task>,
+    fft_len: usize,
+    fft: Option<Arc<dyn ComplexToReal<f64>>>,
+    spec: Vec<Complex<f64>>,
+    time: Vec<f64>,
+    fft_scratch: Vec<Complex<f64>>,
+}
+
+/// Reusable SIMUS engine: validated parameters, derived geometry and all working memory.
+/// After the first frame of a given size, frames are simulated without allocating.
+pub struct Simus {
+    probe: Probe,
+    medium: Medium,
+    options: SimusOptions,
+    geom: ArrayGeom,
+    plan_inputs: PlanInputs,
+    simd: Simd,
+    pool: Option<rayon::ThreadPool>,
+    ws: Workspace,
+}
+
+impl std::fmt::Debug for Simus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simus")
+            .field("probe", &self.probe)
+            .field("medium", &self.medium)
+            .field("options", &self.options)
+            .field("sub_elements", &self.geom.m)
+            .field("simd", &self.simd)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Simus {
+    /// Validates the parameters and derives the array geometry, the pulse duration and the SIMD
+    /// kernel to use.
+    pub fn new(probe: Probe, medium: Medium, options: SimusOptions) -> Result<Self> {
+        probe.validate()?;
+        medium.validate()?;
+        options.validate(probe.fc)?;
+        let (fc, c) = (probe.fc, medium.c);
+        let width = probe.element_width();
+        let m = match options.element_splitting {
+            Some(m) => m as usize,
+            None => {
+                let lambda_min = c / (fc * (1.0 + probe.bandwidth / 200.0));
+                ((width / lambda_min).ceil() as usize).clamp(1, 64)
+            }
+        };
+        let seg = width / m as f64;
+        let n_el = probe.n_elements;
+        let e_pad = n_el.div_ceil(L) * L;
+        let geom = ArrayGeom {
+            n_el,
+            e_pad,
+            m,
+            xe: (0..e_pad).map(|e| if e < n_el { probe.element_x(e) } else { 0.0 }).collect(),
+            xi: (0..m).map(|i| -width / 2.0 + seg / 2.0 + i as f64 * seg).collect(),
+            width,
+            r_min: c / fc / 2.0,
+            kc_half_seg: 2.0 * std::f64::consts::PI * fc / c * seg / 2.0,
+            half_seg_over_c: 2.0 * std::f64::consts::PI / c * seg / 2.0,
+            baffle: probe.baffle,
+            ffd: options.full_frequency_directivity,
+            inv_c: 1.0 / c,
+            beta: medium.attenuation / 8.69 * 1e-6 * 1e2,
+        };
+        let pulse = PulseModel::new(fc, probe.tx_now, probe.bandwidth);
+        let plan_inputs = PlanInputs {
+            fc,
+            c,
+            fs: options.fs.unwrap_or(4.0 * fc),
+            db_thresh: options.db_thresh,
+            frequency_step: options.frequency_step,
+            pulse,
+            pulse_duration: pulse.two_way_pulse_duration(),
+        };
+        let pool = match options.threads {
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|_| crate::error::invalid("options.threads", n, "a thread count the OS can start"))?,
+            ),
+            None => None,
+        };
+        let simd = Simd::detect(options.simd);
+        Ok(Self { probe, medium, options, geom, plan_inputs, simd, pool, ws: Workspace::default() })
+    }
+
+    /// The probe.
+    pub fn probe(&self) -> &Probe {
+        &self.probe
+    }
+
+    /// The medium.
+    pub fn medium(&self) -> &Medium {
+        &self.medium
+    }
+
+    /// The options.
+    pub fn options(&self) -> &SimusOptions {
+        &self.options
+    }
+
+    /// Sub-elements per element (MUST's M).
+    pub fn sub_elements(&self) -> usize {
+        self.geom.m
+    }
+
+    /// Name of the kernel build in use (`"avx512"`, `"avx2"`, `"portable"`).
+    pub fn kernel_name(&self) -> &'static str {
+        self.simd.name()
+    }
+
+    /// Duration (s) of MUST's two-way pulse used to pad the plan's distance.
+    pub fn pulse_duration(&self) -> f64 {
+        self.plan_inputs.pulse_duration
+    }
+
+    /// The frequency plan for this scene and transmit according to `options.plan`:
+    /// MUST's per-call rule, or the fixed [`PlanMode::MaxDistance`] plan.
+    pub fn plan<'a>(&self, scatterers: impl Into<ScattererSlices<'a>>, transmit: &Transmit) -> Result<FrequencyPlan> {
+        match self.options.plan {
+            PlanMode::PerCall => {
+                let s = scatterers.into();
+                s.validate()?;
+                transmit.validate(self.probe.n_elements)?;
+                let n = self.probe.n_elements;
+                let d = s.max_element_distance(self.probe.element_x(0), self.probe.element_x(n - 1));
+                FrequencyPlan::for_max_distance(&self.plan_inputs, d, transmit.max_delay())
+            }
+            PlanMode::MaxDistance { max_distance, max_delay } => self.plan_for_max_distance(max_distance, max_delay),
+        }
+    }
+
+    /// A plan fixed for scatterers up to `max_distance` (m) from any element and transmit delays
+    /// up to `max_delay` (s): use it for every frame of a packet (same length and gain).
+    pub fn plan_for_max_distance(&self, max_distance: f64, max_delay: f64) -> Result<FrequencyPlan> {
+        if !(max_delay.is_finite() && max_delay >= 0.0) {
+            return Err(crate::error::invalid("plan.max_delay", max_delay, "finite and >= 0 (s)"));
+        }
+        FrequencyPlan::for_max_distance(&self.plan_inputs, max_distance, max_delay)
+    }
+
+    /// Plans (per `options.plan`) and simulates one frame.
+    pub fn simulate<'a>(&mut self, scatterers: impl Into<ScattererSlices<'a>>, transmit: &Transmit) -> Result<RfFrame> {
+        let s = scatterers.into();
+        let plan = self.plan(s, transmit)?;
+        let n_el = self.probe.n_elements;
+        let mut data = vec![0.0f32; n_el * plan.n_samples];
+        self.simulate_into(s, transmit, &plan, &mut data)?;
+        Ok(RfFrame { data, n_elements: n_el, n_samples: plan.n_samples, fs: plan.fs, t0: plan.t0, plan })
+    }
+
+    /// Simulates one frame with a given plan into `out`, element-major:
+    /// `out[e * plan.n_samples + k]`. Zero scatterers give all-zero RF. Errors: non-finite
+    /// scatterer (names the row), bad transmit, wrong `out` length, plan of another
+    /// configuration, or a plan whose time window is too short for the scene.
+    pub fn simulate_into<'a>(
+        &mut self,
+        scatterers: impl Into<ScattererSlices<'a>>,
+        transmit: &Transmit,
+        plan: &FrequencyPlan,
+        out: &mut [f32],
+    ) -> Result<()> {
+        let s = scatterers.into();
+        s.validate()?;
+        let n_el = self.probe.n_elements;
+        transmit.validate(n_el)?;
+        self.check_plan(plan)?;
+        if out.len() != n_el * plan.n_samples {
+            return Err(SimusError::OutputLength { got: out.len(), expected: n_el * plan.n_samples });
+        }
+        if self.options.frequency_step <= 1.0 {
+            let d = s.max_element_distance(self.probe.element_x(0), self.probe.element_x(n_el - 1));
+            let needed = 2.0 * (d + self.plan_inputs.pulse_duration * self.medium.c) / self.medium.c
+                + transmit.max_delay();
+            if needed > plan.window() * (1.0 + 1e-12) {
+                return Err(SimusError::PlanTooShort { needed_s: needed, window_s: plan.window() });
+            }
+        }
+        self.prepare(plan, transmit);
+        let pool = self.pool.take();
+        match &pool {
+            Some(p) => p.install(|| self.accumulate(s, plan)),
+            None => self.accumulate(s, plan),
+        }
+        self.pool = pool;
+        self.to_time(plan, out);
+        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
+            return Err(SimusError::NonFiniteOutput { element: i / plan.n_samples, sample: i % plan.n_samples });
+        }
+        if self.options.zero_small_values {
+            zero_small_values(out);
+        }
+        Ok(())
+    }
+
+    fn check_plan(&self, plan: &FrequencyPlan) -> Result<()> {
+        let inp = &self.plan_inputs;
+        if plan.fc != inp.fc || plan.c != inp.c || plan.fs != inp.fs {
+            return Err(SimusError::PlanMismatch("fc, c or fs differ from the engine's"));
+        }
+        let consistent = plan.n_freq >= 3
+            && plan.band_first <= plan.band_last
+            && plan.band_last < plan.n_freq
+            && plan.band_last <= plan.n_fft / 2
+            && plan.n_samples == plan.n_fft.div_ceil(2)
+            && (plan.df - 2.0 * plan.fc / (plan.n_freq - 1) as f64).abs() <= 1e-9 * plan.df;
+        if !consistent {
+            return Err(SimusError::PlanMismatch("inconsistent grid (df, n_freq, band, n_fft)"));
+        }
+        Ok(())
+    }
+
+    /// Bin tables and task partition for this plan and transmit.
+    fn prepare(&mut self, plan: &FrequencyPlan, transmit: &Transmit) {
+        let geom = &self.geom;
+        let ep = geom.e_pad;
+        let nb = plan.n_bins();
+        let ws = &mut self.ws;
+        ws.tab.real_tx = transmit.delays.iter().all(|d| d.is_nan() || *d == 0.0);
+        ws.tab.freqs.clear();
+        ws.tab.freqs.extend((plan.band_first..=plan.band_last).map(|k| plan.frequency(k)));
+        ws.tab.d_re.resize(nb * ep / L, V::default());
+        ws.tab.d_im.resize(nb * ep / L, V::default());
+        ws.tab64.d_re.resize(nb * ep, 0.0);
+        ws.tab64.d_im.resize(nb * ep, 0.0);
+        for (kb, &f) in ws.tab.freqs.iter().enumerate() {
+            for e in 0..ep {
+                let (re, im) = if e < geom.n_el {
+                    let w = transmit.weight(e);
+                    let tau = if transmit.delays[e].is_nan() { 0.0 } else { transmit.delays[e] };
+                    let (s, c) = crate::math::sincos_turns(f * tau);
+                    (w * c, w * s)
+                } else {
+                    (0.0, 0.0)
+                };
+                ws.tab64.d_re[kb * ep + e] = re;
+                ws.tab64.d_im[kb * ep + e] = im;
+                ws.tab.d_re[kb * ep / L + e / L].0[e % L] = re as f32;
+                ws.tab.d_im[kb * ep / L + e / L].0[e % L] = im as f32;
+            }
+        }
+        // fixed partition of the band into ranges of at most `per` bins, sizes differing by <= 1
+        let per = match self.options.accuracy {
+            Accuracy::Fast { reanchor_every, .. } => reanchor_every as usize,
+            Accuracy::Exact => 8,
+        };
+        let n_tasks = nb.div_ceil(per).max(1);
+        ws.tasks.resize_with(n_tasks, Task::default);
+        for (j, t) in ws.tasks.iter_mut().enumerate() {
+            t.bins = j * nb / n_tasks..(j + 1) * nb / n_tasks;
+            t.u.clear();
+            t.u.resize(t.bins.len() * 2 * ep, 0.0);
+            t.sc.prepare(geom, t.bins.len());
+        }
+    }
+
+    /// Streams the scatterers block by block into the tasks' accumulators.
+    fn accumulate(&mut self, s: ScattererSlices<'_>, plan: &FrequencyPlan) {
+        let block = match self.options.accuracy {
+            Accuracy::Fast { scatterer_block, .. } => scatterer_block as usize,
+            Accuracy::Exact => 64,
+        };
+        let exact = matches!(self.options.accuracy, Accuracy::Exact);
+        let geom = &self.geom;
+        let simd = self.simd;
+        let ws = &mut self.ws;
+        let mut start = 0;
+        while start < s.len() {
+            let end = (start + block).min(s.len());
+            setup_block(geom, simd, &s, start..end, plan.df, &mut ws.blk);
+            let (blk, tab, tab64) = (&ws.blk, &ws.tab, &ws.tab64);
+            ws.tasks.par_iter_mut().for_each(|t| {
+                if exact {
+                    accumulate_exact(geom, blk, tab64, &tab.freqs, t.bins.clone(), &mut t.u, &mut t.rbuf);
+                } else {
+                    simd.accumulate(geom, blk, tab, t.bins.clone(), &mut t.sc);
+                    fold(&mut t.sc, &mut t.u, geom.e_pad);
+                }
+            });
+            start = end;
+        }
+    }
+
+    /// Scales the accumulated spectra (`P H² df W`) and transforms them to RF.
+    fn to_time(&mut self, plan: &FrequencyPlan, out: &mut [f32]) {
+        let n = plan.n_fft;
+        let ws = &mut self.ws;
+        if ws.fft_len != n || ws.fft.is_none() {
+            let mut planner = RealFftPlanner::<f64>::new();
+            let fft = planner.plan_fft_inverse(n);
+            ws.spec = fft.make_input_vec();
+            ws.time = fft.make_output_vec();
+            ws.fft_scratch = fft.make_scratch_vec();
+            ws.fft = Some(fft);
+            ws.fft_len = n;
+        }
+        let Some(fft) = ws.fft.clone() else { return };
+        let ep = self.geom.e_pad;
+        let scale: Vec<Complex<f64>> = ws
+            .tab
+            .freqs
+            .iter()
+            .map(|&f| {
+                let w = 2.0 * std::f64::consts::PI * f;
+                let h = self.plan_inputs.pulse.probe(w);
+                Complex::new(0.0, self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * self.geom.width)
+            })
+            .collect();
+        let inv_n = 1.0 / n as f64;
+        for (e, rf) in out.chunks_exact_mut(plan.n_samples).enumerate() {
+            ws.spec.iter_mut().for_each(|v| *v = Complex::new(0.0, 0.0));
+            for t in &ws.tasks {
+                for (kl, kb) in t.bins.clone().enumerate() {
+                    let u = Complex::new(t.u[kl * 2 * ep + e], t.u[kl * 2 * ep + ep + e]);
+                    let k = plan.band_first + kb;
+                    if k < ws.spec.len() {
+                        ws.spec[k] = (scale[kb] * u).conj();
+                    }
+                }
+            }
+            // numpy's irfft ignores the imaginary parts of the DC (and, n even, Nyquist) bins
+            ws.spec[0].im = 0.0;
+            if n % 2 == 0 {
+                if let Some(last) = ws.spec.last_mut() {
+                    last.im = 0.0;
+                }
+            }
+            if fft.process_with_scratch(&mut ws.spec, &mut ws.time, &mut ws.fft_scratch).is_err() {
+                rf.fill(0.0);
+                continue;
+            }
+            for (o, v) in rf.iter_mut().zip(&ws.time) {
+                *o = (v * inv_n) as f32;
+            }
+        }
+    }
+}
+
+/// Geometry and steppers of scatterers `range`, padded with silent scatterers to a multiple of
+/// the receive group size, in parallel over scatterers (pure per-scatterer work: the result does
+/// not depend on the thread count).
+fn setup_block(
+    geom: &ArrayGeom,
+    simd: Simd,
+    s: &ScattererSlices<'_>,
+    range: std::ops::Range<usize>,
+    df: f64,
+    blk: &mut BlockGeom,
+) {
+    let n = range.len();
+    blk.resize(n.div_ceil(G) * G, geom);
+    let stride = geom.m * geom.e_pad;
+    let (x, z, rc) = (&s.x[range.clone()], &s.z[range.clone()], &s.rc[range]);
+    for (i, v) in blk.rc.iter_mut().enumerate() {
+        *v = if i >= n || z[i] < 0.0 { 0.0 } else { f64::from(rc[i]) };
+    }
+    let one = |i: usize, out: ScattererGeom<'_>| {
+        if i < n {
+            simd.setup(geom, x[i], z[i], df, false, out);
+        } else {
+            simd.setup(geom, 0.0, 1.0, df, true, out);
+        }
+    };
+    let geo = blk.r.par_chunks_mut(stride).zip(blk.amp.par_chunks_mut(stride));
+    let steps = blk.e_re.par_chunks_mut(stride / L).zip(blk.e_im.par_chunks_mut(stride / L));
+    if geom.ffd {
+        geo.zip(steps).zip(blk.dirb.par_chunks_mut(stride)).enumerate().for_each(
+            |(i, (((r, amp), (e_re, e_im)), dirb))| one(i, ScattererGeom { r, amp, dirb, e_re, e_im }),
+        );
+    } else {
+        geo.zip(steps).enumerate().for_each(|(i, ((r, amp), (e_re, e_im)))| {
+            one(i, ScattererGeom { r, amp, dirb: &mut [], e_re, e_im })
+        });
+    }
+}
+
+/// Adds the f32 partial sums of a block to the f64 accumulator and clears them.
+fn fold(sc: &mut Scratch, u: &mut [f64], ep: usize) {
+    let nc = ep / L;
+    for (kl, row) in u.chunks_exact_mut(2 * ep).enumerate() {
+        let (u_re, u_im) = row.split_at_mut(ep);
+        for c in 0..nc {
+            let (sr, si) = (&mut sc.s_re[kl * nc + c], &mut sc.s_im[kl * nc + c]);
+            for l in 0..L {
+                u_re[c * L + l] += f64::from(sr.0[l]);
+                u_im[c * L + l] += f64::from(si.0[l]);
+            }
+            *sr = V::default();
+            *si = V::default();
+        }
+    }
+}
+
+/// PyMUST simus.py step 10: `RF *= round(½(1 + tanh((ρ − 1e-5)/1e-6)) / 1e-6)·1e-6`,
+/// `ρ = |RF| / max|RF|` — a quantised soft threshold at −100 dB. No-op on an all-zero frame.
+pub fn zero_small_values(rf: &mut [f32]) {
+    let peak = rf.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    if peak <= 0.0 || !peak.is_finite() {
+        return;
+    }
+    let thr = 1e-5f64;
+    for v in rf.iter_mut() {
+        let rho = f64::from(v.abs()) / f64::from(peak);
+        if rho > thr + 2e-5 {
+            continue; // factor is exactly 1 there
+        }
+        let step = 0.5 * (1.0 + ((rho - thr) / (thr / 10.0)).tanh());
+        let q = (step / (thr / 10.0)).round() * (thr / 10.0);
+        *v = (f64::from(*v) * q) as f32;
+    }
+}

@@ -1,0 +1,546 @@
+//! The smoother: penalised least squares in the DCT-II basis with GCV, weights, missing values and
+//! robust re-weighting (Garcia 2010 CSDA; Garcia 2011 Exp Fluids; MATLAB `smoothn` 2009/03 rev.
+//! 2014/10). See the crate documentation for the equations and the MATLAB/PyMUST differences.
+
+use crate::dct::{DctN, DctNScratch};
+use crate::gcv::{fminbnd, leverage, leverage_1d, s_for_leverage, H_MAX, H_MIN};
+use crate::nearest::Nearest;
+use crate::params::{Flavour, SmoothnError, SmoothnParams};
+use crate::robust::robust_weights;
+
+/// GCV search tolerance on log10 S (MATLAB `errp`, `optimset('TolX', 0.1)`).
+const LOG10_S_TOL: f64 = 0.1;
+/// Robust passes (the initial fit plus two re-weighted fits, MATLAB `RobustStep < 4`).
+const ROBUST_PASSES: u32 = 3;
+/// A point whose final robust weight is below this counts as an outlier in
+/// [`SmoothnReport::outlier_fraction`] (for bisquare: studentised residual u > 2.96).
+pub const OUTLIER_WEIGHT: f64 = 0.5;
+
+/// What one call of [`Smoothn::smooth`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmoothnReport {
+    /// Smoothing parameter used (given, or chosen by GCV). 0 for a single-point grid without a
+    /// given S (nothing to smooth).
+    pub s: f64,
+    /// The last pass stopped on `tol_z` before `max_iter` iterations (MATLAB `exitflag`).
+    pub converged: bool,
+    /// Fraction of the valid points (finite in every component, weight > 0) whose final robust
+    /// weight is below [`OUTLIER_WEIGHT`]; 0 when not robust. The final weights are those computed
+    /// from the final fit ([`Smoothn::robust_weights`]).
+    pub outlier_fraction: f64,
+    /// Iterations, summed over the robust passes.
+    pub iterations: u32,
+    /// Number of GCV score evaluations (0 with a given S).
+    pub gcv_evaluations: u32,
+    /// Bounds of the GCV search on S, from the average leverage in [1e-6, 0.99].
+    pub s_bounds: [f64; 2],
+    /// Automatic S ended within 0.1 (log10) of a bound (MATLAB warns: set S by hand).
+    pub s_at_bound: bool,
+}
+
+/// Per-component buffers (all grid-sized).
+struct Component {
+    /// Component number.
+    index: usize,
+    /// Data with missing values set to 0.
+    y: Vec<f64>,
+    /// Current smoothed field.
+    z: Vec<f64>,
+    /// DCT of the pseudo-data `Wtot (y − z) + z` (spectral layout).
+    dcty: Vec<f64>,
+    buf: Vec<f64>,
+    buf2: Vec<f64>,
+    dct: DctNScratch,
+    /// Partial sums of the last pass over this component.
+    sums: [f64; 3],
+}
+
+/// The residual buffer (`buf`), as read by [`robust_weights`].
+impl AsRef<[f64]> for Component {
+    fn as_ref(&self) -> &[f64] {
+        &self.buf
+    }
+}
+
+/// A smoothing workspace for one grid shape and component count. Reusing it for successive frames
+/// of that shape allocates nothing and re-plans nothing.
+pub struct Smoothn {
+    shape: Vec<usize>,
+    n: usize,
+    plan: DctN,
+    comps: Vec<Component>,
+    valid: Vec<bool>,
+    finite: Vec<bool>,
+    w: Vec<f64>,
+    wtot: Vec<f64>,
+    robust_w: Vec<f64>,
+    lambda_m: Vec<f64>,
+    lambda_key: Option<(u32, Vec<f64>)>,
+    gamma: Vec<f64>,
+    power: Vec<f64>,
+    /// `keep` masks of the initial-guess low-pass (MATLAB, PyMUST) in spectral layout.
+    keep: [Vec<bool>; 2],
+    /// Squared ratio unnormalised/orthonormal DCT-II per coefficient (PyMUST GCV), on demand.
+    pymust_scale: Vec<f64>,
+    nearest: Nearest,
+    scratch: Vec<f64>,
+    medians: Vec<f64>,
+    /// Normalised spacing of every axis, and of the non-singleton axes.
+    spacing: Vec<f64>,
+    spacing_ns: Vec<f64>,
+}
+
+/// Smooths `data` (`components × grid`, component-major, each component row-major) in one call.
+/// Convenience wrapper over [`Smoothn`]; returns the smoothed field and the report.
+pub fn smoothn(
+    data: &[f64],
+    shape: &[usize],
+    components: usize,
+    weights: Option<&[f64]>,
+    params: &SmoothnParams,
+) -> Result<(Vec<f64>, SmoothnReport), SmoothnError> {
+    let mut ws = Smoothn::new(shape, components)?;
+    let mut out = vec![0.0; data.len()];
+    let report = ws.smooth(data, weights, params, &mut out)?;
+    Ok((out, report))
+}
+
+/// Runs `f` on every component, on rayon threads when the `parallel` feature is on. Each
+/// component's arithmetic is sequential, so the result does not depend on the thread count.
+fn for_each_component<F: Fn(&mut Component) + Sync + Send>(comps: &mut [Component], f: F) {
+    #[cfg(feature = "parallel")]
+    if comps.len() > 1 {
+        use rayon::prelude::*;
+        comps.par_iter_mut().for_each(f);
+        return;
+    }
+    comps.iter_mut().for_each(f);
+}
+
+/// `Σ_i f(a_i, b_i)` accumulated in 4 interleaved lanes: a fixed order (deterministic) that the
+/// compiler can vectorise.
+fn lane_sum(a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let body = a.len() / 4 * 4;
+    for (a4, b4) in a[..body].chunks_exact(4).zip(b[..body].chunks_exact(4)) {
+        for l in 0..4 {
+            acc[l] += f(a4[l], b4[l]);
+        }
+    }
+    let tail: f64 = a[body..].iter().zip(&b[body..]).map(|(x, y)| f(*x, *y)).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// Three-slice [`lane_sum`].
+fn lane_sum3(a: &[f64], b: &[f64], c: &[f64], f: impl Fn(f64, f64, f64) -> f64) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let body = a.len() / 4 * 4;
+    for ((a4, b4), c4) in a[..body].chunks_exact(4).zip(b[..body].chunks_exact(4)).zip(c[..body].chunks_exact(4)) {
+        for l in 0..4 {
+            acc[l] += f(a4[l], b4[l], c4[l]);
+        }
+    }
+    let tail: f64 = a[body..].iter().zip(&b[body..]).zip(&c[body..]).map(|((x, y), z)| f(*x, *y, *z)).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+impl Smoothn {
+    /// Plans a workspace for a row-major grid of `shape` (any number of axes, each ≥ 1) and
+    /// `components ≥ 1` jointly smoothed components.
+    pub fn new(shape: &[usize], components: usize) -> Result<Self, SmoothnError> {
+        if shape.is_empty() || shape.contains(&0) || components == 0 {
+            return Err(SmoothnError::InvalidGrid { shape: shape.to_vec(), components });
+        }
+        let plan = DctN::new(shape);
+        let n = plan.len();
+        let comps = (0..components)
+            .map(|index| Component {
+                index,
+                y: vec![0.0; n],
+                z: vec![0.0; n],
+                dcty: vec![0.0; n],
+                buf: vec![0.0; n],
+                buf2: vec![0.0; n],
+                dct: plan.make_scratch(),
+                sums: [0.0; 3],
+            })
+            .collect();
+        let mut keep = [vec![false; n], vec![false; n]];
+        plan.spectral_indices(|p, k| {
+            keep[0][p] = k.iter().zip(shape).all(|(k, n)| *k < n.div_ceil(10));
+            keep[1][p] = k.iter().zip(shape).all(|(k, n)| *k as f64 / *n as f64 <= 0.1);
+        });
+        Ok(Self {
+            shape: shape.to_vec(),
+            n,
+            plan,
+            comps,
+            valid: vec![false; n],
+            finite: vec![false; n],
+            w: vec![0.0; n],
+            wtot: vec![0.0; n],
+            robust_w: vec![1.0; n],
+            lambda_m: vec![0.0; n],
+            lambda_key: None,
+            gamma: vec![0.0; n],
+            power: vec![0.0; n],
+            keep,
+            pymust_scale: Vec::new(),
+            nearest: Nearest::default(),
+            scratch: Vec::new(),
+            medians: Vec::new(),
+            spacing: Vec::new(),
+            spacing_ns: Vec::new(),
+        })
+    }
+
+    /// Grid shape.
+    pub fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+
+    /// Number of components.
+    pub fn components(&self) -> usize {
+        self.comps.len()
+    }
+
+    /// Final robust weight of every grid point from the last call (1 when not robust, 0 where
+    /// data are missing).
+    pub fn robust_weights(&self) -> &[f64] {
+        &self.robust_w
+    }
+
+    /// Bytes held by the workspace (for checking that memory grows linearly with the grid).
+    pub fn workspace_bytes(&self) -> usize {
+        let f = std::mem::size_of::<f64>();
+        let per_comp: usize = self
+            .comps
+            .iter()
+            .map(|c| {
+                (c.y.capacity() + c.z.capacity() + c.dcty.capacity() + c.buf.capacity() + c.buf2.capacity()) * f
+                    + c.dct.bytes()
+            })
+            .sum();
+        let grid = (self.w.capacity() + self.wtot.capacity() + self.robust_w.capacity() + self.lambda_m.capacity()) * f
+            + (self.gamma.capacity() + self.power.capacity() + self.pymust_scale.capacity() + self.scratch.capacity())
+                * f
+            + self.valid.capacity()
+            + self.finite.capacity()
+            + self.keep[0].capacity()
+            + self.keep[1].capacity();
+        per_comp + grid + self.nearest.bytes()
+    }
+
+    /// Smooths `data` (`components × grid`, component-major; NaN and ±inf are missing values) with
+    /// optional per-point `weights` (grid-sized, finite, ≥ 0) into `out` (same layout as `data`).
+    pub fn smooth(
+        &mut self,
+        data: &[f64],
+        weights: Option<&[f64]>,
+        params: &SmoothnParams,
+        out: &mut [f64],
+    ) -> Result<SmoothnReport, SmoothnError> {
+        params.validate()?;
+        let (n, ncomp) = (self.n, self.comps.len());
+        let check = |what, got: usize, expected| {
+            if got == expected {
+                Ok(())
+            } else {
+                Err(SmoothnError::LengthMismatch { what, got, expected })
+            }
+        };
+        check("data", data.len(), n * ncomp)?;
+        check("out", out.len(), n * ncomp)?;
+        if let Some(w) = weights {
+            check("weights", w.len(), n)?;
+        }
+        if let Some(sp) = &params.spacing {
+            if sp.len() != self.shape.len() {
+                return Err(SmoothnError::SpacingLength { got: sp.len(), expected: self.shape.len() });
+            }
+        }
+        let pym = params.flavour == Flavour::Pymust;
+
+        // Missing values and weights (zero weight where any component is not finite).
+        let mut max_w = 0.0f64;
+        let mut nof = 0usize;
+        for p in 0..n {
+            let fin = (0..ncomp).all(|c| data[c * n + p].is_finite());
+            let wp = weights.map_or(1.0, |w| w[p]);
+            if !(wp.is_finite() && wp >= 0.0) {
+                return Err(SmoothnError::InvalidWeight { index: p, value: wp });
+            }
+            self.finite[p] = fin;
+            self.w[p] = if fin { wp } else { 0.0 };
+            nof += usize::from(fin);
+            max_w = max_w.max(self.w[p]);
+        }
+        if max_w <= 0.0 {
+            return Err(SmoothnError::NoValidData { points: n });
+        }
+        if !pym {
+            self.w.iter_mut().for_each(|w| *w /= max_w);
+        }
+        for (v, w) in self.valid.iter_mut().zip(&self.w) {
+            *v = *w > 0.0;
+        }
+        let mut is_weighted = if pym { self.w.iter().any(|w| *w != 1.0) } else { self.w.iter().any(|w| *w < 1.0) };
+        for (c, comp) in self.comps.iter_mut().enumerate() {
+            for ((y, d), fin) in comp.y.iter_mut().zip(&data[c * n..(c + 1) * n]).zip(&self.finite) {
+                *y = if *fin { *d } else { 0.0 };
+            }
+        }
+        self.robust_w.iter_mut().zip(&self.valid).for_each(|(r, v)| *r = if *v { 1.0 } else { 0.0 });
+
+        let m = params.order;
+        // Normalised spacing over all axes (MATLAB dI = dI/max(dI)), and over non-singleton axes.
+        self.spacing.clear();
+        match &params.spacing {
+            Some(sp) => {
+                let mx = sp.iter().copied().fold(0.0, f64::max);
+                self.spacing.extend(sp.iter().map(|d| d / mx));
+            }
+            None => self.spacing.resize(self.shape.len(), 1.0),
+        }
+        self.spacing_ns.clear();
+        self.spacing_ns.extend(self.shape.iter().zip(&self.spacing).filter(|(n, _)| **n > 1).map(|(_, d)| *d));
+        let n_dims = self.spacing_ns.len() as u32;
+        let s_bounds = if pym {
+            let s_min = if m == 2 {
+                let t = (1.0 + (1.0 + 8.0 * H_MAX.powf(2.0)).sqrt()) / 4.0 / H_MAX.powf(4.0);
+                (t - 1.0) / 16.0
+            } else {
+                s_for_leverage(H_MAX, m, 1)
+            };
+            [s_min, s_for_leverage(H_MIN, m, 1)]
+        } else {
+            [s_for_leverage(H_MAX, m, n_dims), s_for_leverage(H_MIN, m, n_dims)]
+        };
+
+        if n == 1 {
+            out.copy_from_slice(data);
+            return Ok(SmoothnReport {
+                s: params.s.unwrap_or(0.0),
+                converged: true,
+                outlier_fraction: 0.0,
+                iterations: 0,
+                gcv_evaluations: 0,
+                s_bounds,
+                s_at_bound: false,
+            });
+        }
+        self.update_lambda(m);
+        if pym && self.pymust_scale.len() != n {
+            self.pymust_scale.resize(n, 0.0);
+            let (shape, scale) = (&self.shape, &mut self.pymust_scale);
+            self.plan.spectral_indices(|p, k| {
+                scale[p] = k.iter().zip(shape).map(|(k, n)| if *k == 0 { 4.0 } else { 2.0 } * *n as f64).product();
+            });
+        }
+
+        // Initial guess (weighted/missing data) or zeros.
+        if is_weighted {
+            self.initial_guess(nof < n, pym);
+        } else {
+            self.comps.iter_mut().for_each(|c| c.z.fill(0.0));
+        }
+
+        let auto = params.s.is_none();
+        let mut s = params.s.unwrap_or(s_bounds[0]);
+        if !auto {
+            self.set_gamma(s);
+        }
+        self.wtot.copy_from_slice(&self.w);
+        let rf = if is_weighted { 1.75 } else { 1.0 };
+        let (noe, nof) = (n as f64, nof as f64);
+        let (mut iterations, mut gcv_evaluations, mut converged) = (0u32, 0u32, false);
+        for pass in 1..=ROBUST_PASSES {
+            let sum_wtot: f64 = self.wtot.iter().sum();
+            let fast_rss = if pym { sum_wtot / max_w / noe > 0.95 } else { sum_wtot / noe > 0.9 };
+            let mut tol = 1.0f64;
+            let mut nit = 0u32;
+            while tol > params.tol_z && nit < params.max_iter {
+                nit += 1;
+                let (plan, wtot) = (&self.plan, &self.wtot);
+                for_each_component(&mut self.comps, |c| {
+                    for (((b, w), y), z) in c.buf.iter_mut().zip(wtot).zip(&c.y).zip(&c.z) {
+                        *b = w * (y - z) + z;
+                    }
+                    plan.forward(&c.buf, &mut c.dcty, &mut c.dct);
+                });
+                if auto && nit.is_power_of_two() {
+                    let (p, evals) = self.minimise_gcv(s_bounds, fast_rss, pym, nof, noe);
+                    gcv_evaluations += evals;
+                    s = 10f64.powf(p);
+                    self.set_gamma(s);
+                }
+                let (plan, gamma) = (&self.plan, &self.gamma);
+                for_each_component(&mut self.comps, |c| {
+                    plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
+                    // Sums in 4 interleaved lanes (fixed order, vectorisable).
+                    let mut acc = [[0.0f64; 4]; 3];
+                    let tail = c.z.len() % 4;
+                    let relax = |zold: f64, zhat: f64, acc: &mut [[f64; 4]; 3], l: usize| {
+                        let znew = rf * zhat + (1.0 - rf) * zold;
+                        acc[0][l] += (zold - znew) * (zold - znew);
+                        acc[1][l] += znew * znew;
+                        acc[2][l] += zold * zold;
+                        znew
+                    };
+                    for (z4, h4) in c.z.chunks_exact_mut(4).zip(c.buf2.chunks_exact(4)) {
+                        for l in 0..4 {
+                            z4[l] = relax(z4[l], h4[l], &mut acc, l);
+                        }
+                    }
+                    let n = c.z.len();
+                    for i in n - tail..n {
+                        c.z[i] = relax(c.z[i], c.buf2[i], &mut acc, i % 4);
+                    }
+                    c.sums = acc.map(|a| (a[0] + a[1]) + (a[2] + a[3]));
+                });
+                let sum = |i: usize| self.comps.iter().map(|c| c.sums[i]).sum::<f64>();
+                // MATLAB: ‖z_old − z‖/‖z‖ (new iterate); PyMUST divides by the old iterate, and in its
+                // first pass z0 aliases z so the change reads 0 and the pass stops after one iteration.
+                let denominator = if pym { sum(2) } else { sum(1) };
+                tol = if !is_weighted || (pym && pass == 1) { 0.0 } else { sum(0).sqrt() / denominator.sqrt() };
+            }
+            iterations += nit;
+            converged = nit < params.max_iter;
+            if !params.robust {
+                break;
+            }
+            let h = if pym {
+                match m {
+                    1 => 1.0 / (1.0 + 8.0 * s / self.spacing[0]).sqrt(),
+                    _ => leverage_1d(s / self.spacing[0].powi(4), 2),
+                }
+            } else {
+                leverage(s, m, &self.spacing_ns)
+            };
+            for_each_component(&mut self.comps, |c| {
+                for ((b, y), z) in c.buf.iter_mut().zip(&c.y).zip(&c.z) {
+                    *b = y - z;
+                }
+            });
+            let (wf, scratch, medians) = (params.weight_function, &mut self.scratch, &mut self.medians);
+            robust_weights(&self.comps, &self.finite, h, wf, pym, scratch, medians, &mut self.robust_w);
+            for ((wt, w), r) in self.wtot.iter_mut().zip(&self.w).zip(&mut self.robust_w) {
+                if *w == 0.0 {
+                    *r = 0.0;
+                }
+                *wt = w * *r;
+            }
+            is_weighted = true;
+        }
+
+        for (c, comp) in self.comps.iter().enumerate() {
+            out[c * n..(c + 1) * n].copy_from_slice(&comp.z);
+        }
+        let n_valid = self.valid.iter().filter(|v| **v).count();
+        let outliers = if params.robust {
+            self.robust_w.iter().zip(&self.valid).filter(|(r, v)| **v && **r < OUTLIER_WEIGHT).count()
+        } else {
+            0
+        };
+        let near = |b: f64| (s.log10() - b.log10()).abs() < LOG10_S_TOL;
+        Ok(SmoothnReport {
+            s,
+            converged,
+            outlier_fraction: outliers as f64 / n_valid as f64,
+            iterations,
+            gcv_evaluations,
+            s_bounds,
+            s_at_bound: auto && (near(s_bounds[0]) || near(s_bounds[1])),
+        })
+    }
+
+    /// Λ^m in spectral layout: `Λ(k) = Σ_a (2 − 2cos(π k_a / n_a)) / dI_a²`, cached per (m, dI).
+    fn update_lambda(&mut self, m: u32) {
+        if self.lambda_key.as_ref().is_some_and(|(km, ks)| *km == m && *ks == self.spacing) {
+            return;
+        }
+        let (shape, lm, spacing) = (&self.shape, &mut self.lambda_m, &self.spacing);
+        self.plan.spectral_indices(|p, k| {
+            let mut l = 0.0;
+            for ((k, n), d) in k.iter().zip(shape).zip(spacing) {
+                l += (2.0 - 2.0 * (std::f64::consts::PI * *k as f64 / *n as f64).cos()) / (d * d);
+            }
+            lm[p] = l.powi(m as i32);
+        });
+        self.lambda_key = Some((m, self.spacing.clone()));
+    }
+
+    /// `Γ = 1 / (1 + S Λ^m)`.
+    fn set_gamma(&mut self, s: f64) {
+        for (g, l) in self.gamma.iter_mut().zip(&self.lambda_m) {
+            *g = 1.0 / (1.0 + s * l);
+        }
+    }
+
+    /// Minimises the GCV score over log10 S; returns (log10 S, evaluations).
+    fn minimise_gcv(&mut self, bounds: [f64; 2], fast_rss: bool, pym: bool, nof: f64, noe: f64) -> (f64, u32) {
+        if fast_rss {
+            // RSS = Σ_k (Γ_k − 1)² Σ_c DCTy_c(k)²: no inverse transform needed (Parseval).
+            self.power.fill(0.0);
+            for c in &self.comps {
+                for (p, d) in self.power.iter_mut().zip(&c.dcty) {
+                    *p += d * d;
+                }
+            }
+            if pym {
+                self.power.iter_mut().zip(&self.pymust_scale).for_each(|(p, f)| *p *= f);
+            }
+        }
+        let score = |p: f64| -> f64 {
+            let s = 10f64.powf(p);
+            for (g, l) in self.gamma.iter_mut().zip(&self.lambda_m) {
+                *g = 1.0 / (1.0 + s * l);
+            }
+            let tr_h = lane_sum(&self.gamma, &self.gamma, |g, _| g);
+            let rss = if fast_rss {
+                lane_sum(&self.gamma, &self.power, |g, pw| pw * (g - 1.0) * (g - 1.0))
+            } else {
+                // Σ over valid points of Wtot (y − ŷ)²; Wtot = 0 (exactly) where data are missing.
+                let (plan, gamma, wtot) = (&self.plan, &self.gamma, &self.wtot);
+                for_each_component(&mut self.comps, |c| {
+                    plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
+                    c.sums[0] = lane_sum3(&c.y, &c.buf2, wtot, |y, yh, w| w * (y - yh) * (y - yh));
+                });
+                self.comps.iter().map(|c| c.sums[0]).sum()
+            };
+            let denom = 1.0 - tr_h / noe;
+            rss / nof / (denom * denom)
+        };
+        let best = fminbnd(score, bounds[0].log10(), bounds[1].log10(), LOG10_S_TOL);
+        (best.x, best.evaluations)
+    }
+
+    /// MATLAB `InitialGuess`: nearest-neighbour fill of the missing values, then keep only the
+    /// lowest `ceil(n_a/10)` DCT coefficients along every axis, per component. PyMUST keeps
+    /// `k_a/n_a ≤ 0.1` and zeroes every component after the first (its mask spans the component
+    /// axis too).
+    fn initial_guess(&mut self, missing: bool, pym: bool) {
+        if missing {
+            self.nearest.compute(&self.shape, &self.finite);
+        }
+        let nearest = self.nearest.nearest();
+        let (plan, finite, keep) = (&self.plan, &self.finite, &self.keep[usize::from(pym)]);
+        let ncomp = self.comps.len() as f64;
+        for_each_component(&mut self.comps, |c| {
+            if pym && c.index as f64 / ncomp > 0.1 {
+                c.z.fill(0.0);
+                return;
+            }
+            for (p, b) in c.buf.iter_mut().enumerate() {
+                *b = if !missing || finite[p] { c.y[p] } else { c.y[nearest[p]] };
+            }
+            plan.forward(&c.buf, &mut c.buf2, &mut c.dct);
+            for (v, k) in c.buf2.iter_mut().zip(keep) {
+                if !k {
+                    *v = 0.0;
+                }
+            }
+            plan.inverse(&c.buf2, &mut c.z, &mut c.dct);
+        });
+    }
+}
