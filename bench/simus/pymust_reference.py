@@ -13,6 +13,7 @@ a sub-directory is written with
   scene.json            the MUST param/options used (TXdelay as the float32 values PyMUST used,
                         NaN written as null), plus PyMUST's frequency grid (Nf, kept band, df)
 Fixed seeds (numpy default_rng); the scenes are small so the committed data stays < 3 MB.
+Optional argument after OUT_DIR: a scene name to regenerate only that scene.
 """
 import json
 import os
@@ -101,6 +102,13 @@ def scenes():
     dels = pymust.txdelay(p, 0.0)
     x, z, rc = random_scene(rng, 40, (-15e-3, 15e-3), (10e-3, 25e-3))
     out.append(("p4_2v_s40_pw0", p, x, z, rc, dels, {}))
+    # 7. 26 000 scatterers (the paper's count; 64 elements and a 20 x 20 mm box to keep the data
+    #    small), 0 deg plane wave
+    rng = np.random.default_rng(6)
+    p = paper_param(64)
+    dels = pymust.txdelay(p, 0.0)
+    x, z, rc = random_scene(rng, 26000, (-10e-3, 10e-3), (10e-3, 30e-3))
+    out.append(("s26000_paper64_pw0", p, x, z, rc, dels, {}))
     return out
 
 
@@ -118,7 +126,10 @@ def main():
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     out_dir = sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "nodes", "simus", "tests", "data")
     os.makedirs(out_dir, exist_ok=True)
+    only = sys.argv[2] if len(sys.argv) > 2 else None
     for name, p, x, z, rc, dels, opts in scenes():
+        if only is not None and name != only:
+            continue
         dels = np.abs(dels.astype(np.float64))  # txdelay gives -0.0 for zero delays
         used_delays = dels.astype(np.float32)  # pfield casts the delays to float32
         apod = np.array(p.get("TXapodization", np.ones((1, p.Nelements))), np.float64).ravel()

@@ -17,7 +17,8 @@
 //!    centre of the pulse leaves an element with zero delay).
 //!
 //! MUST re-plans on every call, so the length and the gain (∝ df) of the RF change with the
-//! scene. [`FrequencyPlan::for_max_distance`] fixes the grid for a whole packet instead.
+//! scene. [`crate::Simus::plan_for_max_distance`] (or [`crate::PlanMode::MaxDistance`]) fixes the
+//! grid for a whole packet instead.
 
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;

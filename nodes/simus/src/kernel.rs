@@ -11,12 +11,16 @@
 //!
 //! Layout: lanes = elements (16 per vector), so the transmit sum is a vertical sum plus one
 //! horizontal reduction per (scatterer, bin); the receive accumulation reads and writes one row
-//! `U[k][·]` per group of [`G`] scatterers. Each phasor is loaded once per `NB` = 4 bins. The
+//! `U[k][·]` per group of [`G`] scatterers. Each phasor is loaded once per `NB` = 2 bins, and
+//! with 32 vector registers two chunks are processed together (4 independent recursion chains
+//! for M = 2, as the complex multiply's 7-cycle latency needs ≥ 4 chains in flight). The
 //! generic code is instantiated for the vector types of [`crate::simd`].
+
+// Lane loops index several arrays in lockstep: plain index loops keep them vectorisable.
+#![allow(clippy::needless_range_loop)]
 
 use std::ops::Range;
 
-use crate::math::sinc_eps;
 use crate::pfield::{ArrayGeom, BlockGeom};
 use crate::simd::Lanes;
 
@@ -25,7 +29,16 @@ pub(crate) const L: usize = 16;
 /// Scatterers per receive group.
 pub(crate) const G: usize = 4;
 /// Bins per pass over the phasors.
-const NB: usize = 4;
+const NB: usize = 2;
+/// Chunks of 16 elements processed together in pass 1 (builds with 32 vector registers).
+const CW: usize = 2;
+
+/// General delays: `D_e(k)` complex, per bin.
+pub(crate) const TX_COMPLEX: u8 = 0;
+/// No delays: `D_e(k) = apod_e` real and constant.
+pub(crate) const TX_REAL: u8 = 1;
+/// No delays and unit weights (padding lanes still 0: their phasors are 0).
+pub(crate) const TX_UNIT: u8 = 2;
 
 /// One vector of 16 lanes, 64-byte aligned.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -38,8 +51,9 @@ pub(crate) struct Tables {
     pub d_re: Vec<V>,
     pub d_im: Vec<V>,
     pub freqs: Vec<f64>,
-    /// All delays zero: `D_e(k) = apod_e` is real and the same for every bin.
-    pub real_tx: bool,
+    /// Transmit kind: [`TX_COMPLEX`], [`TX_REAL`] (all delays 0: `D_e(k) = apod_e`, the same
+    /// for every bin) or [`TX_UNIT`] (all delays 0 and all weights 1).
+    pub tx: u8,
 }
 
 /// Working memory of one bin range (one parallel task).
@@ -84,20 +98,23 @@ pub(crate) fn accumulate<S: Lanes>(
     bins: Range<usize>,
     sc: &mut Scratch,
 ) {
-    match (geom.ffd, tab.real_tx, geom.m) {
-        (true, _, _) => run::<S, 0, true, false>(geom, blk, tab, bins, sc),
-        (false, true, 1) => run::<S, 1, false, true>(geom, blk, tab, bins, sc),
-        (false, true, 2) => run::<S, 2, false, true>(geom, blk, tab, bins, sc),
-        (false, true, _) => run::<S, 0, false, true>(geom, blk, tab, bins, sc),
-        (false, false, 1) => run::<S, 1, false, false>(geom, blk, tab, bins, sc),
-        (false, false, 2) => run::<S, 2, false, false>(geom, blk, tab, bins, sc),
-        (false, false, _) => run::<S, 0, false, false>(geom, blk, tab, bins, sc),
+    match (geom.ffd, tab.tx, geom.m) {
+        (true, _, _) => run::<S, 0, true, TX_COMPLEX>(geom, blk, tab, bins, sc),
+        (false, TX_UNIT, 1) => run::<S, 1, false, TX_UNIT>(geom, blk, tab, bins, sc),
+        (false, TX_UNIT, 2) => run::<S, 2, false, TX_UNIT>(geom, blk, tab, bins, sc),
+        (false, TX_UNIT, _) => run::<S, 0, false, TX_UNIT>(geom, blk, tab, bins, sc),
+        (false, TX_REAL, 1) => run::<S, 1, false, TX_REAL>(geom, blk, tab, bins, sc),
+        (false, TX_REAL, 2) => run::<S, 2, false, TX_REAL>(geom, blk, tab, bins, sc),
+        (false, TX_REAL, _) => run::<S, 0, false, TX_REAL>(geom, blk, tab, bins, sc),
+        (false, _, 1) => run::<S, 1, false, TX_COMPLEX>(geom, blk, tab, bins, sc),
+        (false, _, 2) => run::<S, 2, false, TX_COMPLEX>(geom, blk, tab, bins, sc),
+        (false, _, _) => run::<S, 0, false, TX_COMPLEX>(geom, blk, tab, bins, sc),
     }
 }
 
 /// `M` = sub-elements per element when known at compile time, 0 = `geom.m` at run time.
 #[inline(always)]
-fn run<S: Lanes, const M: usize, const FFD: bool, const REAL: bool>(
+fn run<S: Lanes, const M: usize, const FFD: bool, const TX: u8>(
     geom: &ArrayGeom,
     blk: &BlockGeom,
     tab: &Tables,
@@ -112,14 +129,18 @@ fn run<S: Lanes, const M: usize, const FFD: bool, const REAL: bool>(
         let mut k = bins.start;
         while k < bins.end {
             if FFD {
-                directivity(geom, blk, g0, tab.freqs[k], sc);
-                step::<S, 1, M, FFD, REAL>(geom, blk, tab, g0, k, k - bins.start, sc);
+                directivity::<S>(geom, blk, g0, tab.freqs[k], sc);
+                step::<S, 1, M, FFD, TX, 1>(geom, blk, tab, g0, k, k - bins.start, sc);
                 k += 1;
             } else if k + NB <= bins.end {
-                step::<S, NB, M, FFD, REAL>(geom, blk, tab, g0, k, k - bins.start, sc);
+                if S::WIDE {
+                    step::<S, NB, M, FFD, TX, CW>(geom, blk, tab, g0, k, k - bins.start, sc);
+                } else {
+                    step::<S, NB, M, FFD, TX, 1>(geom, blk, tab, g0, k, k - bins.start, sc);
+                }
                 k += NB;
             } else {
-                step::<S, 1, M, FFD, REAL>(geom, blk, tab, g0, k, k - bins.start, sc);
+                step::<S, 1, M, FFD, TX, 1>(geom, blk, tab, g0, k, k - bins.start, sc);
                 k += 1;
             }
         }
@@ -150,7 +171,6 @@ fn exp_nonpos<S: Lanes>(x: S) -> S {
 /// (error ~1e-7).
 #[inline(always)]
 fn anchor<S: Lanes>(geom: &ArrayGeom, blk: &BlockGeom, g0: usize, mm: usize, f: f64, sc: &mut Scratch) {
-    const MAGIC32: f32 = 12_582_912.0;
     let nc = geom.e_pad / L;
     let np = G * nc * mm;
     let src0 = g0 * nc * mm;
@@ -164,45 +184,185 @@ fn anchor<S: Lanes>(geom: &ArrayGeom, blk: &BlockGeom, g0: usize, mm: usize, f: 
         if geom.beta > 0.0 {
             a = a.mul(exp_nonpos(S::scaled(r, att)));
         }
-        let q = u.mul(S::splat(4.0)).add(S::splat(MAGIC32)).sub(S::splat(MAGIC32)); // round(4u)
-        let x = q.neg_mul_add(S::splat(0.25), u).mul(S::splat(std::f32::consts::TAU)); // |x| <= pi/4
-        let x2 = x.mul(x);
-        let sp = x2.mul_add(S::splat(1.0 / 362_880.0), S::splat(-1.0 / 5040.0));
-        let sp = x2.mul_add(sp, S::splat(1.0 / 120.0));
-        let sp = x2.mul_add(sp, S::splat(-1.0 / 6.0));
-        let sp = x2.mul_add(sp, S::splat(1.0));
-        let s = x.mul(sp);
-        let cp = x2.mul_add(S::splat(1.0 / 40_320.0), S::splat(-1.0 / 720.0));
-        let cp = x2.mul_add(cp, S::splat(1.0 / 24.0));
-        let cp = x2.mul_add(cp, S::splat(-0.5));
-        let c = x2.mul_add(cp, S::splat(1.0));
-        // rotate by q quarter turns, q in {-2..2}: cos(q pi/2) = 1 - y + y (y - 1)/6,
-        // sin(q pi/2) = q (4 - y)/3, y = q^2 (exact in f32 for these q)
-        let y = q.mul(q);
-        let cq = y.mul(y.sub(S::splat(1.0))).mul(S::splat(1.0 / 6.0)).add(S::splat(1.0).sub(y));
-        let sq = q.mul(S::splat(4.0).sub(y)).mul(S::splat(1.0 / 3.0));
-        let sin = s.mul_add(cq, c.mul(sq));
-        let cos = s.neg_mul_add(sq, c.mul(cq));
+        let (sin, cos) = sincos_turns::<S>(u);
         a.mul(cos).store(&mut sc.p_re[i]);
         a.mul(sin).store(&mut sc.p_im[i]);
     }
 }
 
-/// Full-frequency directivity `sinc(k W/(2M) sin θ)` of every phasor at frequency `f`.
-fn directivity(geom: &ArrayGeom, blk: &BlockGeom, g0: usize, f: f64, sc: &mut Scratch) {
+/// `(sin 2πu, cos 2πu)` in f32 for |u| ≤ ½ (absolute error ~1e-7): octant reduction, Taylor
+/// polynomials on |x| ≤ π/4, then an exact rotation by the quarter turns.
+#[inline(always)]
+fn sincos_turns<S: Lanes>(u: S) -> (S, S) {
+    const MAGIC32: f32 = 12_582_912.0;
+    let q = u.mul(S::splat(4.0)).add(S::splat(MAGIC32)).sub(S::splat(MAGIC32)); // round(4u)
+    let x = q.neg_mul_add(S::splat(0.25), u).mul(S::splat(std::f32::consts::TAU)); // |x| <= pi/4
+    let x2 = x.mul(x);
+    let sp = x2.mul_add(S::splat(1.0 / 362_880.0), S::splat(-1.0 / 5040.0));
+    let sp = x2.mul_add(sp, S::splat(1.0 / 120.0));
+    let sp = x2.mul_add(sp, S::splat(-1.0 / 6.0));
+    let sp = x2.mul_add(sp, S::splat(1.0));
+    let s = x.mul(sp);
+    let cp = x2.mul_add(S::splat(1.0 / 40_320.0), S::splat(-1.0 / 720.0));
+    let cp = x2.mul_add(cp, S::splat(1.0 / 24.0));
+    let cp = x2.mul_add(cp, S::splat(-0.5));
+    let c = x2.mul_add(cp, S::splat(1.0));
+    // rotate by q quarter turns, q in {-2..2}: cos(q pi/2) = 1 - y + y (y - 1)/6,
+    // sin(q pi/2) = q (4 - y)/3, y = q^2 (exact in f32 for these q)
+    let y = q.mul(q);
+    let cq = y.mul(y.sub(S::splat(1.0))).mul(S::splat(1.0 / 6.0)).add(S::splat(1.0).sub(y));
+    let sq = q.mul(S::splat(4.0).sub(y)).mul(S::splat(1.0 / 3.0));
+    (s.mul_add(cq, c.mul(sq)), s.neg_mul_add(sq, c.mul(cq)))
+}
+
+/// Full-frequency directivity of every phasor of the group at frequency `f`: MUST's
+/// `sin(|x| + 1e-16)/(|x| + 1e-16)`, `x = k(f) W/(2M) sin θ = dirb·f`, in f32 (error ~1e-7).
+#[inline(always)]
+fn directivity<S: Lanes>(geom: &ArrayGeom, blk: &BlockGeom, g0: usize, f: f64, sc: &mut Scratch) {
+    const MAGIC32: f32 = 12_582_912.0;
     let n = G * geom.e_pad / L * geom.m;
     let src0 = g0 * geom.e_pad * geom.m;
     for i in 0..n {
-        let d = &mut sc.dir[i];
-        for l in 0..L {
-            d.0[l] = sinc_eps(blk.dirb[src0 + i * L + l] * f) as f32;
+        let src = src0 + i * L;
+        let x = S::scaled(&blk.dirb[src..src + L], f).add(S::splat(1e-16));
+        let t = x.mul(S::splat(1.0 / std::f32::consts::TAU));
+        let u = t.sub(t.add(S::splat(MAGIC32)).sub(S::splat(MAGIC32)));
+        let (sin, _) = sincos_turns::<S>(u);
+        sin.div(x).store(&mut sc.dir[i]);
+    }
+}
+
+/// The phasor state and steppers of one scatterer, `[chunk][m]`.
+struct Phasors<'a> {
+    p_re: &'a mut [V],
+    p_im: &'a mut [V],
+    e_re: &'a [V],
+    e_im: &'a [V],
+    dir: &'a [V],
+}
+
+/// Pass 1 for `CW` consecutive chunks from `c` of one scatterer (`gi`): sums the sub-element
+/// phasors into R (stored for pass 2), accumulates the transmit sums `tr`, `ti` and advances
+/// the phasors by `N` bins. Several chunks at once give the out-of-order core independent
+/// recursion chains to overlap.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn chunks<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8, const CW: usize>(
+    ph: Phasors<'_>,
+    tab: &Tables,
+    mm: usize,
+    nc: usize,
+    c: usize,
+    k: usize,
+    gi: usize,
+    r_re_all: &mut [V],
+    r_im_all: &mut [V],
+    tr: &mut [S; N],
+    ti: &mut [S; N],
+) {
+    let span = c * mm..(c + CW) * mm;
+    let (pr_c, pi_c) = (&mut ph.p_re[span.clone()], &mut ph.p_im[span.clone()]);
+    let (er_c, ei_c) = (&ph.e_re[span.clone()], &ph.e_im[span]);
+    let mut rr = [[S::zero(); N]; CW];
+    let mut ri = [[S::zero(); N]; CW];
+    if M > 0 && !FFD {
+        // all CW·M recursion chains advance together, one bin at a time (independent chains
+        // interleaved for the out-of-order core)
+        let mut pr = [[S::zero(); M]; CW];
+        let mut pi = [[S::zero(); M]; CW];
+        let mut er = [[S::zero(); M]; CW];
+        let mut ei = [[S::zero(); M]; CW];
+        for w in 0..CW {
+            for m in 0..M {
+                let i = w * M + m;
+                er[w][m] = S::load(&er_c[i]);
+                ei[w][m] = S::load(&ei_c[i]);
+                pr[w][m] = S::load(&pr_c[i]);
+                pi[w][m] = S::load(&pi_c[i]);
+            }
+        }
+        for b in 0..N {
+            for w in 0..CW {
+                rr[w][b] = pr[w][0];
+                ri[w][b] = pi[w][0];
+                for m in 1..M {
+                    rr[w][b] = rr[w][b].add(pr[w][m]);
+                    ri[w][b] = ri[w][b].add(pi[w][m]);
+                }
+            }
+            for w in 0..CW {
+                for m in 0..M {
+                    let (a, bb) = (pr[w][m], pi[w][m]);
+                    pr[w][m] = bb.neg_mul_add(ei[w][m], a.mul(er[w][m]));
+                    pi[w][m] = a.mul_add(ei[w][m], bb.mul(er[w][m]));
+                }
+            }
+        }
+        for w in 0..CW {
+            for m in 0..M {
+                let i = w * M + m;
+                pr[w][m].store(&mut pr_c[i]);
+                pi[w][m].store(&mut pi_c[i]);
+            }
+        }
+    } else {
+        for m in 0..mm {
+            for w in 0..CW {
+                let i = w * mm + m;
+                let er = S::load(&er_c[i]);
+                let ei = S::load(&ei_c[i]);
+                let mut pr = S::load(&pr_c[i]);
+                let mut pi = S::load(&pi_c[i]);
+                for b in 0..N {
+                    if FFD {
+                        let d = S::load(&ph.dir[c * mm + i]);
+                        rr[w][b] = d.mul_add(pr, rr[w][b]);
+                        ri[w][b] = d.mul_add(pi, ri[w][b]);
+                    } else if m == 0 {
+                        rr[w][b] = pr;
+                        ri[w][b] = pi;
+                    } else {
+                        rr[w][b] = rr[w][b].add(pr);
+                        ri[w][b] = ri[w][b].add(pi);
+                    }
+                    let nr = pi.neg_mul_add(ei, pr.mul(er));
+                    let ni = pr.mul_add(ei, pi.mul(er));
+                    pr = nr;
+                    pi = ni;
+                }
+                pr.store(&mut pr_c[i]);
+                pi.store(&mut pi_c[i]);
+            }
+        }
+    }
+    let rows = c * N * G..(c + CW) * N * G;
+    let (rr_c, ri_c) = (&mut r_re_all[rows.clone()], &mut r_im_all[rows]);
+    for w in 0..CW {
+        for b in 0..N {
+            rr[w][b].store(&mut rr_c[(w * N + b) * G + gi]);
+            ri[w][b].store(&mut ri_c[(w * N + b) * G + gi]);
+            if TX == TX_UNIT {
+                tr[b] = tr[b].add(rr[w][b]);
+                ti[b] = ti[b].add(ri[w][b]);
+            } else if TX == TX_REAL {
+                let wv = S::load(&tab.d_re[c + w]);
+                tr[b] = wv.mul_add(rr[w][b], tr[b]);
+                ti[b] = wv.mul_add(ri[w][b], ti[b]);
+            } else {
+                let dr = S::load(&tab.d_re[(k + b) * nc + c + w]);
+                let di = S::load(&tab.d_im[(k + b) * nc + c + w]);
+                tr[b] = dr.mul_add(rr[w][b], tr[b]);
+                tr[b] = di.neg_mul_add(ri[w][b], tr[b]);
+                ti[b] = dr.mul_add(ri[w][b], ti[b]);
+                ti[b] = di.mul_add(rr[w][b], ti[b]);
+            }
         }
     }
 }
 
 /// `N` consecutive bins from band bin `k` (row `kl` of `sc.s_*`) for scatterers `g0..g0+G`.
 #[inline(always)]
-fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const REAL: bool>(
+fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8, const CW: usize>(
     geom: &ArrayGeom,
     blk: &BlockGeom,
     tab: &Tables,
@@ -215,6 +375,9 @@ fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const REAL: b
     let mm = if M == 0 { geom.m } else { M };
     let per_s = nc * mm;
     let mut t = [[(0f32, 0f32); N]; G];
+    // R layout [chunk][bin][scatterer]: pass 1 writes one column, pass 2 reads one block per chunk
+    let (r_re_all, r_im_all) = (&mut sc.r_re[..nc * N * G], &mut sc.r_im[..nc * N * G]);
+    let (r_re_all, r_im_all) = (&mut *r_re_all, &mut *r_im_all);
     // transmit: R_se = sum_m P, T_s = sum_e D_e R_se; the phasors advance by N bins
     for (gi, tg) in t.iter_mut().enumerate() {
         let rc = blk.rc[g0 + gi] as f32;
@@ -225,75 +388,53 @@ fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const REAL: b
         let dir = if FFD { &sc.dir[gi * per_s..(gi + 1) * per_s] } else { &sc.dir[..0] };
         let mut tr = [S::zero(); N];
         let mut ti = [S::zero(); N];
-        for c in 0..nc {
-            let mut rr = [S::zero(); N];
-            let mut ri = [S::zero(); N];
-            let (pr_c, pi_c) = (&mut p_re[c * mm..(c + 1) * mm], &mut p_im[c * mm..(c + 1) * mm]);
-            let (er_c, ei_c) = (&e_re[c * mm..(c + 1) * mm], &e_im[c * mm..(c + 1) * mm]);
-            for m in 0..mm {
-                let er = S::load(&er_c[m]);
-                let ei = S::load(&ei_c[m]);
-                let mut pr = S::load(&pr_c[m]);
-                let mut pi = S::load(&pi_c[m]);
-                for b in 0..N {
-                    if FFD {
-                        let d = S::load(&dir[c * mm + m]);
-                        rr[b] = d.mul_add(pr, rr[b]);
-                        ri[b] = d.mul_add(pi, ri[b]);
-                    } else {
-                        rr[b] = rr[b].add(pr);
-                        ri[b] = ri[b].add(pi);
-                    }
-                    let nr = pi.neg_mul_add(ei, pr.mul(er));
-                    let ni = pr.mul_add(ei, pi.mul(er));
-                    pr = nr;
-                    pi = ni;
-                }
-                pr.store(&mut pr_c[m]);
-                pi.store(&mut pi_c[m]);
-            }
-            for b in 0..N {
-                rr[b].store(&mut sc.r_re[(b * G + gi) * nc + c]);
-                ri[b].store(&mut sc.r_im[(b * G + gi) * nc + c]);
-                if REAL {
-                    let w = S::load(&tab.d_re[c]);
-                    tr[b] = w.mul_add(rr[b], tr[b]);
-                    ti[b] = w.mul_add(ri[b], ti[b]);
-                } else {
-                    let dr = S::load(&tab.d_re[(k + b) * nc + c]);
-                    let di = S::load(&tab.d_im[(k + b) * nc + c]);
-                    tr[b] = dr.mul_add(rr[b], tr[b]);
-                    tr[b] = di.neg_mul_add(ri[b], tr[b]);
-                    ti[b] = dr.mul_add(ri[b], ti[b]);
-                    ti[b] = di.mul_add(rr[b], ti[b]);
-                }
-            }
+        let mut c = 0;
+        while c + CW <= nc {
+            let ph = Phasors { p_re: &mut *p_re, p_im: &mut *p_im, e_re, e_im, dir };
+            chunks::<S, N, M, FFD, TX, CW>(ph, tab, mm, nc, c, k, gi, r_re_all, r_im_all, &mut tr, &mut ti);
+            c += CW;
         }
-        for b in 0..N {
-            tg[b] = (tr[b].hsum() * rc, ti[b].hsum() * rc);
+        while c < nc {
+            let ph = Phasors { p_re: &mut *p_re, p_im: &mut *p_im, e_re, e_im, dir };
+            chunks::<S, N, M, FFD, TX, 1>(ph, tab, mm, nc, c, k, gi, r_re_all, r_im_all, &mut tr, &mut ti);
+            c += 1;
+        }
+        if N == 4 {
+            let sums = S::hsum8([tr[0], tr[1], tr[2], tr[3], ti[0], ti[1], ti[2], ti[3]], rc);
+            for b in 0..N {
+                tg[b] = (sums[b], sums[4 + b]);
+            }
+        } else {
+            for b in 0..N {
+                tg[b] = (tr[b].hsum() * rc, ti[b].hsum() * rc);
+            }
         }
     }
     // receive: U_e += T_s R_se for the G scatterers, one row load/store per bin and chunk
+    let mut tv = [[(S::zero(), S::zero()); G]; N];
     for b in 0..N {
-        let mut tv = [(S::zero(), S::zero()); G];
         for gi in 0..G {
-            tv[gi] = (S::splat(t[gi][b].0), S::splat(t[gi][b].1));
+            tv[b][gi] = (S::splat(t[gi][b].0), S::splat(t[gi][b].1));
         }
-        let row = (kl + b) * nc;
-        let (s_re, s_im) = (&mut sc.s_re[row..row + nc], &mut sc.s_im[row..row + nc]);
-        for c in 0..nc {
-            let mut sr = S::load(&s_re[c]);
-            let mut si = S::load(&s_im[c]);
-            for (gi, &(tre, tim)) in tv.iter().enumerate() {
-                let rr = S::load(&sc.r_re[(b * G + gi) * nc + c]);
-                let ri = S::load(&sc.r_im[(b * G + gi) * nc + c]);
+    }
+    let (s_re, s_im) = (&mut sc.s_re[kl * nc..(kl + N) * nc], &mut sc.s_im[kl * nc..(kl + N) * nc]);
+    for c in 0..nc {
+        let rows = c * N * G..(c + 1) * N * G;
+        let (rr_c, ri_c) = (&r_re_all[rows.clone()], &r_im_all[rows]);
+        for b in 0..N {
+            let mut sr = S::load(&s_re[b * nc + c]);
+            let mut si = S::load(&s_im[b * nc + c]);
+            for gi in 0..G {
+                let (tre, tim) = tv[b][gi];
+                let rr = S::load(&rr_c[b * G + gi]);
+                let ri = S::load(&ri_c[b * G + gi]);
                 sr = tre.mul_add(rr, sr);
                 sr = tim.neg_mul_add(ri, sr);
                 si = tre.mul_add(ri, si);
                 si = tim.mul_add(rr, si);
             }
-            sr.store(&mut s_re[c]);
-            si.store(&mut s_im[c]);
+            sr.store(&mut s_re[b * nc + c]);
+            si.store(&mut s_im[b * nc + c]);
         }
     }
 }

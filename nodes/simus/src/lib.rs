@@ -39,7 +39,7 @@
 //!
 //! ## Numerics
 //! [`Accuracy::Fast`] (default) steps the phasors `P ← P·exp(iΔk r)` in complex f32 like MUST but
-//! re-anchors them exactly (f64 phase) every ≤ 64 bins, vectorised over elements (AVX-512/AVX2
+//! re-anchors them exactly (f64 phase) every ≤ 128 bins, vectorised over elements (AVX-512/AVX2
 //! with FMA chosen at run time, portable fallback), in parallel over fixed ranges of bins and
 //! streaming fixed blocks of scatterers: memory is independent of the number of scatterers and
 //! the output bits do not depend on the thread count. [`Accuracy::Exact`] evaluates every phasor
@@ -68,7 +68,7 @@ mod transmit;
 pub use error::{Result, SimusError};
 pub use grid::FrequencyPlan;
 pub use must::{MustParam, MustParts};
-pub use params::{Accuracy, Medium, PlanMode, SimusOptions};
+pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
 pub use probe::{Baffle, Probe, PRESET_NAMES};
 pub use scatterers::{ScattererSlices, Scatterers};
 pub use simus::{zero_small_values, RfFrame, Simus};

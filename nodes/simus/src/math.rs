@@ -15,23 +15,37 @@ pub(crate) fn sincos_turns(t: f64) -> (f64, f64) {
     let u = t - q * 0.25; // |u| <= 1/8 turn
     let x = u * std::f64::consts::TAU; // |x| <= pi/4
     let x2 = x * x;
-    // Taylor series, truncation error < 1e-16 on |x| <= pi/4
-    let s = x
-        * (1.0
-            + x2 * (-1.0 / 6.0
-                + x2 * (1.0 / 120.0
-                    + x2 * (-1.0 / 5040.0
-                        + x2 * (1.0 / 362_880.0
-                            + x2 * (-1.0 / 39_916_800.0
-                                + x2 * (1.0 / 6_227_020_800.0 + x2 * (-1.0 / 1_307_674_368_000.0))))))));
-    let c = 1.0
-        + x2 * (-0.5
-            + x2 * (1.0 / 24.0
-                + x2 * (-1.0 / 720.0
-                    + x2 * (1.0 / 40_320.0
-                        + x2 * (-1.0 / 3_628_800.0
-                            + x2 * (1.0 / 479_001_600.0
-                                + x2 * (-1.0 / 87_178_291_200.0 + x2 * (1.0 / 20_922_789_888_000.0))))))));
+    // Taylor series (Horner), truncation error < 1e-16 on |x| <= pi/4
+    const S: [f64; 8] = [
+        -1.0 / 1_307_674_368_000.0,
+        1.0 / 6_227_020_800.0,
+        -1.0 / 39_916_800.0,
+        1.0 / 362_880.0,
+        -1.0 / 5040.0,
+        1.0 / 120.0,
+        -1.0 / 6.0,
+        1.0,
+    ];
+    const C: [f64; 9] = [
+        1.0 / 20_922_789_888_000.0,
+        -1.0 / 87_178_291_200.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 40_320.0,
+        -1.0 / 720.0,
+        1.0 / 24.0,
+        -0.5,
+        1.0,
+    ];
+    let mut sp = 0.0;
+    for a in S {
+        sp = sp * x2 + a;
+    }
+    let s = x * sp;
+    let mut c = 0.0;
+    for a in C {
+        c = c * x2 + a;
+    }
     let swap = quadrant & 1 == 1;
     let (sv, cv) = if swap { (c, s) } else { (s, c) };
     let sin_sign = if quadrant & 2 == 2 { -1.0 } else { 1.0 };
@@ -39,29 +53,39 @@ pub(crate) fn sincos_turns(t: f64) -> (f64, f64) {
     (sv * sin_sign, cv * cos_sign)
 }
 
+/// 1/k! for k = 0..=12.
+const INV_FACT: [f64; 13] = [
+    1.0,
+    1.0,
+    1.0 / 2.0,
+    1.0 / 6.0,
+    1.0 / 24.0,
+    1.0 / 120.0,
+    1.0 / 720.0,
+    1.0 / 5040.0,
+    1.0 / 40_320.0,
+    1.0 / 362_880.0,
+    1.0 / 3_628_800.0,
+    1.0 / 39_916_800.0,
+    1.0 / 479_001_600.0,
+];
+
 /// `exp(x)` for `x <= 0` (returns 0 below −700).
 #[inline(always)]
 pub(crate) fn exp_nonpos(x: f64) -> f64 {
     const LOG2E: f64 = std::f64::consts::LOG2_E;
-    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-01;
-    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     let xc = x.clamp(-700.0, 0.0);
     let shifted = xc * LOG2E + MAGIC;
     let n = shifted - MAGIC;
     let ni = (shifted.to_bits().wrapping_sub(MAGIC.to_bits())) as i64; // = n
     let r = (xc - n * LN2_HI) - n * LN2_LO; // |r| <= ln2/2
-    let p = 1.0
-        + r * (1.0
-            + r * (1.0 / 2.0
-                + r * (1.0 / 6.0
-                    + r * (1.0 / 24.0
-                        + r * (1.0 / 120.0
-                            + r * (1.0 / 720.0
-                                + r * (1.0 / 5040.0
-                                    + r * (1.0 / 40_320.0
-                                        + r * (1.0 / 362_880.0
-                                            + r * (1.0 / 3_628_800.0
-                                                + r * (1.0 / 39_916_800.0 + r * (1.0 / 479_001_600.0))))))))))));
+                                            // Taylor series of e^r to r^12 (Horner), truncation error < 1e-17 on |r| <= ln2/2
+    let mut p = 0.0;
+    for k in (0..=12).rev() {
+        p = p * r + INV_FACT[k];
+    }
     let scale = f64::from_bits(((ni + 1023) as u64) << 52);
     let v = p * scale;
     if x < -700.0 {

@@ -63,7 +63,7 @@ pub enum PlanMode {
 }
 
 fn default_reanchor() -> u32 {
-    64
+    128
 }
 fn default_block() -> u32 {
     256
@@ -75,14 +75,17 @@ fn default_block() -> u32 {
 #[serde(tag = "mode", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Accuracy {
     /// Reference: every phasor `exp((−α + ik) r)` evaluated directly in f64 at every frequency
-    /// bin, all sums in f64. Slow (about 20× [`Accuracy::Fast`]); for tests and error studies.
+    /// bin, all sums in f64 (no SIMD). Slow (~100× [`Accuracy::Fast`]); for tests and error studies.
     Exact,
     /// f32 SIMD kernel with incremental phase stepping (`EXP ← EXP·EXPdf`, as MUST) and exact
     /// (f64 phase) re-anchoring at least every `reanchor_every` bins; partial sums in f32 over
     /// blocks of `scatterer_block` scatterers, then accumulated in f64. Default.
-    /// Typical error vs `Exact`: nRMS ≈ 1e-6 with the defaults (tests/accuracy.rs).
+    /// Typical error vs `Exact`: nRMS ≈ 2e-6 with the defaults (tests/accuracy.rs prints the
+    /// table against `reanchor_every`).
     Fast {
-        /// Maximum number of bins between exact re-anchorings, in [1, 4096]. Default 64.
+        /// Maximum number of bins between exact re-anchorings, in [1, 4096]. Default 128.
+        /// The band is split into `ceil(n_bins / reanchor_every)` fixed ranges of equal size
+        /// (±1 bin), which are also the parallel tasks (8 to 10 for the paper scenes).
         #[serde(default = "default_reanchor")]
         reanchor_every: u32,
         /// Scatterers per f32 partial sum (and per geometry block), in [1, 65536]. Default 256.
@@ -95,6 +98,20 @@ impl Default for Accuracy {
     fn default() -> Self {
         Accuracy::Fast { reanchor_every: default_reanchor(), scatterer_block: default_block() }
     }
+}
+
+/// Which build of the fast kernel runs (chosen at run time from the CPU's features; the
+/// output differs between builds only by rounding, nRMS ~3e-7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KernelChoice {
+    /// AVX-512 + FMA, else AVX2 + FMA, else portable.
+    #[default]
+    Auto,
+    /// AVX2 + FMA if available, else portable (never AVX-512).
+    Avx2,
+    /// Portable build without FMA.
+    Portable,
 }
 
 fn default_db_thresh() -> f64 {
@@ -123,7 +140,8 @@ pub struct SimusOptions {
     #[serde(default = "default_one", alias = "FrequencyStep", alias = "frequencystep")]
     pub frequency_step: f64,
     /// Element directivity evaluated at every frequency (`true`) or at fc only (`false`, MUST's
-    /// default). MUST `FullFrequencyDirectivity`.
+    /// default). MUST `FullFrequencyDirectivity`. Costs ~2.5× in the fast mode (one f32 sinc per
+    /// sub-element and bin); changes the paper scene's RF by nRMS ~1e-2.
     #[serde(default, alias = "FullFrequencyDirectivity", alias = "fullfrequencydirectivity")]
     pub full_frequency_directivity: bool,
     /// Sub-elements per element; absent = MUST's automatic `ceil(width / λmin)`,
@@ -140,10 +158,10 @@ pub struct SimusOptions {
     /// Numerical method.
     #[serde(default)]
     pub accuracy: Accuracy,
-    /// Use the AVX-512 or AVX2 + FMA build of the fast kernel when the CPU has it (default true);
-    /// false = the portable build (same algorithm without FMA: the scalar twin).
-    #[serde(default = "default_true")]
-    pub simd: bool,
+    /// Build of the fast kernel: the best the CPU supports (default), at most AVX2, or the
+    /// portable build (same algorithm without FMA: the scalar twin the tests compare against).
+    #[serde(default)]
+    pub kernel: KernelChoice,
     /// Worker threads: absent = rayon's global pool; `n` = a dedicated pool of n threads.
     /// The output bits do not depend on the thread count.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -161,7 +179,7 @@ impl Default for SimusOptions {
             zero_small_values: true,
             plan: PlanMode::PerCall,
             accuracy: Accuracy::default(),
-            simd: true,
+            kernel: KernelChoice::Auto,
             threads: None,
         }
     }

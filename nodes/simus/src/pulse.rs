@@ -8,7 +8,7 @@
 //! * One-way probe (PZT + lens) response, a generalised-normal window:
 //!   `H(ω) = sqrt(exp(−(|ω−ωc| / (ωB/2 / ln2^(1/p)))^p))`, `ωB = bandwidth/100·ωc`,
 //!   `p = ln 126 / ln(2ωc/ωB)`; `bandwidth` is the pulse-echo −6 dB fractional bandwidth.
-//! * [`two_way_pulse_duration`] ports `getpulse(param, 2)` (1 ns grid) — SIMUS only uses the
+//! * [`PulseModel::two_way_pulse_duration`] ports `getpulse(param, 2)` (1 ns grid) — SIMUS only uses the
 //!   time of its last sample to pad the maximal distance of the frequency grid.
 
 use std::f64::consts::PI;

@@ -17,7 +17,7 @@ use realfft::{ComplexToReal, RealFftPlanner};
 use crate::error::{Result, SimusError};
 use crate::exact::{accumulate_exact, Tables64};
 use crate::grid::{FrequencyPlan, PlanInputs};
-use crate::kernel::{Scratch, Tables, G, L, V};
+use crate::kernel::{Scratch, Tables, G, L, TX_COMPLEX, TX_REAL, TX_UNIT, V};
 use crate::params::{Accuracy, Medium, PlanMode, SimusOptions};
 use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
 use crate::probe::Probe;
@@ -71,6 +71,7 @@ struct Workspace {
     spec: Vec<Complex<f64>>,
     time: Vec<f64>,
     fft_scratch: Vec<Complex<f64>>,
+    scale: Vec<f64>,
 }
 
 /// Reusable SIMUS engine: validated parameters, derived geometry and all working memory.
@@ -151,7 +152,7 @@ impl Simus {
             ),
             None => None,
         };
-        let simd = Simd::detect(options.simd);
+        let simd = Simd::detect(options.kernel);
         Ok(Self { probe, medium, options, geom, plan_inputs, simd, pool, ws: Workspace::default() })
     }
 
@@ -241,8 +242,8 @@ impl Simus {
         }
         if self.options.frequency_step <= 1.0 {
             let d = s.max_element_distance(self.probe.element_x(0), self.probe.element_x(n_el - 1));
-            let needed = 2.0 * (d + self.plan_inputs.pulse_duration * self.medium.c) / self.medium.c
-                + transmit.max_delay();
+            let needed =
+                2.0 * (d + self.plan_inputs.pulse_duration * self.medium.c) / self.medium.c + transmit.max_delay();
             if needed > plan.window() * (1.0 + 1e-12) {
                 return Err(SimusError::PlanTooShort { needed_s: needed, window_s: plan.window() });
             }
@@ -254,10 +255,7 @@ impl Simus {
             None => self.accumulate(s, plan),
         }
         self.pool = pool;
-        self.to_time(plan, out);
-        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
-            return Err(SimusError::NonFiniteOutput { element: i / plan.n_samples, sample: i % plan.n_samples });
-        }
+        self.spectra_to_rf(plan, out);
         if self.options.zero_small_values {
             zero_small_values(out);
         }
@@ -287,7 +285,13 @@ impl Simus {
         let ep = geom.e_pad;
         let nb = plan.n_bins();
         let ws = &mut self.ws;
-        ws.tab.real_tx = transmit.delays.iter().all(|d| d.is_nan() || *d == 0.0);
+        let no_delays = transmit.delays.iter().all(|d| d.is_nan() || *d == 0.0);
+        let unit = (0..geom.n_el).all(|e| transmit.weight(e) == 1.0);
+        ws.tab.tx = match (no_delays, unit) {
+            (true, true) => TX_UNIT,
+            (true, false) => TX_REAL,
+            _ => TX_COMPLEX,
+        };
         ws.tab.freqs.clear();
         ws.tab.freqs.extend((plan.band_first..=plan.band_last).map(|k| plan.frequency(k)));
         ws.tab.d_re.resize(nb * ep / L, V::default());
@@ -315,6 +319,7 @@ impl Simus {
             Accuracy::Fast { reanchor_every, .. } => reanchor_every as usize,
             Accuracy::Exact => 8,
         };
+        // ranges of at most `per` bins (sizes differ by <= 1): also the unit of parallelism
         let n_tasks = nb.div_ceil(per).max(1);
         ws.tasks.resize_with(n_tasks, Task::default);
         for (j, t) in ws.tasks.iter_mut().enumerate() {
@@ -353,7 +358,7 @@ impl Simus {
     }
 
     /// Scales the accumulated spectra (`P H² df W`) and transforms them to RF.
-    fn to_time(&mut self, plan: &FrequencyPlan, out: &mut [f32]) {
+    fn spectra_to_rf(&mut self, plan: &FrequencyPlan, out: &mut [f32]) {
         let n = plan.n_fft;
         let ws = &mut self.ws;
         if ws.fft_len != n || ws.fft.is_none() {
@@ -367,16 +372,14 @@ impl Simus {
         }
         let Some(fft) = ws.fft.clone() else { return };
         let ep = self.geom.e_pad;
-        let scale: Vec<Complex<f64>> = ws
-            .tab
-            .freqs
-            .iter()
-            .map(|&f| {
-                let w = 2.0 * std::f64::consts::PI * f;
-                let h = self.plan_inputs.pulse.probe(w);
-                Complex::new(0.0, self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * self.geom.width)
-            })
-            .collect();
+        // SPECT = df·W · P(ω) H(ω)² · U (purely imaginary factor)
+        ws.scale.clear();
+        ws.scale.extend(ws.tab.freqs.iter().map(|&f| {
+            let w = 2.0 * std::f64::consts::PI * f;
+            let h = self.plan_inputs.pulse.probe(w);
+            self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * self.geom.width
+        }));
+        let scale = &ws.scale;
         let inv_n = 1.0 / n as f64;
         for (e, rf) in out.chunks_exact_mut(plan.n_samples).enumerate() {
             ws.spec.iter_mut().for_each(|v| *v = Complex::new(0.0, 0.0));
@@ -385,13 +388,13 @@ impl Simus {
                     let u = Complex::new(t.u[kl * 2 * ep + e], t.u[kl * 2 * ep + ep + e]);
                     let k = plan.band_first + kb;
                     if k < ws.spec.len() {
-                        ws.spec[k] = (scale[kb] * u).conj();
+                        ws.spec[k] = (Complex::new(0.0, scale[kb]) * u).conj();
                     }
                 }
             }
             // numpy's irfft ignores the imaginary parts of the DC (and, n even, Nyquist) bins
             ws.spec[0].im = 0.0;
-            if n % 2 == 0 {
+            if n.is_multiple_of(2) {
                 if let Some(last) = ws.spec.last_mut() {
                     last.im = 0.0;
                 }
@@ -435,13 +438,14 @@ fn setup_block(
     let geo = blk.r.par_chunks_mut(stride).zip(blk.amp.par_chunks_mut(stride));
     let steps = blk.e_re.par_chunks_mut(stride / L).zip(blk.e_im.par_chunks_mut(stride / L));
     if geom.ffd {
-        geo.zip(steps).zip(blk.dirb.par_chunks_mut(stride)).enumerate().for_each(
-            |(i, (((r, amp), (e_re, e_im)), dirb))| one(i, ScattererGeom { r, amp, dirb, e_re, e_im }),
-        );
+        geo.zip(steps)
+            .zip(blk.dirb.par_chunks_mut(stride))
+            .enumerate()
+            .for_each(|(i, (((r, amp), (e_re, e_im)), dirb))| one(i, ScattererGeom { r, amp, dirb, e_re, e_im }));
     } else {
-        geo.zip(steps).enumerate().for_each(|(i, ((r, amp), (e_re, e_im)))| {
-            one(i, ScattererGeom { r, amp, dirb: &mut [], e_re, e_im })
-        });
+        geo.zip(steps)
+            .enumerate()
+            .for_each(|(i, ((r, amp), (e_re, e_im)))| one(i, ScattererGeom { r, amp, dirb: &mut [], e_re, e_im }));
     }
 }
 

@@ -19,11 +19,12 @@ fn probe_loads_from_toml_and_json_with_must_aliases() {
     assert_eq!(p.bandwidth, 75.0); // MUST default
     assert!((p.element_width() - 2.65e-4).abs() < 1e-15);
     p.validate().unwrap();
-    let j: Probe = serde_json::from_str(r#"{"fc": 7.6e6, "pitch": 3e-4, "width": 2.7e-4, "n_elements": 4, "baffle": 1.5}"#)
-        .unwrap();
+    let j: Probe =
+        serde_json::from_str(r#"{"fc": 7.6e6, "pitch": 3e-4, "width": 2.7e-4, "n_elements": 4, "baffle": 1.5}"#)
+            .unwrap();
     assert_eq!(j.baffle, Baffle::Impedance(1.5));
     assert_eq!(j.tx_now, 1.0); // MUST default
-    // round trip
+                               // round trip
     let back: Probe = serde_json::from_str(&serde_json::to_string(&j).unwrap()).unwrap();
     assert_eq!(back, j);
 }

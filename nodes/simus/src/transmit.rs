@@ -82,9 +82,7 @@ impl Transmit {
 
     /// MUST `txdelay(x0, z0, param)` for a linear array: `−sign(z0)·|e − (x0, z0)|/c − min`.
     fn point(probe: &Probe, c: f64, x0: f64, z0: f64) -> Self {
-        let d = (0..probe.n_elements)
-            .map(|e| -z0.signum() * (probe.element_x(e) - x0).hypot(z0) / c)
-            .collect();
+        let d = (0..probe.n_elements).map(|e| -z0.signum() * (probe.element_x(e) - x0).hypot(z0) / c).collect();
         Self::from_raw(d)
     }
 
@@ -119,7 +117,7 @@ impl Transmit {
                 expected: n_elements,
             });
         }
-        if let Some(d) = self.delays.iter().find(|d| !d.is_nan() && !(d.is_finite() && **d >= 0.0 && **d < 1.0)) {
+        if let Some(d) = self.delays.iter().find(|d| !d.is_nan() && !(0.0..1.0).contains(*d)) {
             return Err(invalid("transmit.delays", d, "NaN (element off) or finite in [0, 1) s"));
         }
         if let Some(a) = self.apodization.iter().find(|a| !a.is_finite()) {

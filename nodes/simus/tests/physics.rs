@@ -1,5 +1,6 @@
 //! Physics checks that need no PyMUST: echo timing, symmetry, linearity, directivity nulls,
 //! attenuation slope, reciprocity, plane-wave tilt.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
 mod common;
 
@@ -192,7 +193,8 @@ fn attenuation_slope() {
     let alpha = 0.5;
     let run = |att: f64| {
         let medium = Medium { c: 1540.0, attenuation: att };
-        let mut simus = linear_engine(&probe, &medium, SimusOptions { element_splitting: Some(1), ..Default::default() });
+        let mut simus =
+            linear_engine(&probe, &medium, SimusOptions { element_splitting: Some(1), ..Default::default() });
         let plan = simus.plan_for_max_distance(0.05, 0.0).unwrap();
         let mut out = vec![0f32; plan.n_samples];
         simus.simulate_into(&one(0.0, r as f32), &Transmit::zero(1), &plan, &mut out).unwrap();

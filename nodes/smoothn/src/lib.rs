@@ -6,8 +6,9 @@
 //! D. Garcia, "A fast all-in-one method for automated post-processing of PIV data",
 //! *Exp. Fluids* 50 (2011) 1247-1259, following Garcia's published MATLAB `smoothn`
 //! (2009/03, revised 2014/10; <https://www.biomecardio.com/matlab/smoothn.html>). It is the
-//! regulariser that Shahriari & Garcia (2018, *Phys. Med. Biol.* 63 205011, SPH-SIMUS) apply to
-//! vector Doppler fields. No IPC: this crate works on slices.
+//! "robust and unsupervised regularizer" that Shahriari & Garcia (2018, "Meshfree simulations of
+//! ultrasound vector flow imaging using smoothed particle hydrodynamics", *Phys. Med. Biol.*; after
+//! their eq. 20) apply to vector Doppler fields. No IPC: this crate works on slices.
 //!
 //! # Method
 //! For one component, the smoothed field `z` of data `y` with weights `W` minimises
@@ -15,7 +16,7 @@
 //! eigenvectors (reflective boundaries), with eigenvalues
 //! `Λ(k) = Σ_a (2 − 2 cos(π k_a / n_a)) / dI_a²` (`dI` = spacing normalised by its maximum). Hence
 //! * unweighted data: `z = IDCT(Γ ∘ DCT(y))`, `Γ = 1 / (1 + S Λ^m)`, orthonormal N-D DCT
-//!   ([`dct`], via `realfft`, O(n log n) for any length);
+//!   ([`dct`], via `rustfft`, O(n log n) for any length);
 //! * weights / missing values (NaN, ±inf; weight 0): iterate
 //!   `z ← RF · IDCT(Γ ∘ DCT(W∘(y − z) + z)) + (1 − RF) z` (RF = 1.75 for weighted data) until
 //!   `‖Δz‖/‖z‖ ≤ tol_z`, from an initial guess (nearest-neighbour fill, then the lowest ~10 % of the
@@ -55,14 +56,16 @@
 //! 4. Initial guess: MATLAB low-passes every component (keeps `k_a < ceil(n_a/10)`); PyMUST's mask
 //!    spans the component axis and zeroes every component but the first (keeps `k_a/n_a ≤ 0.1`).
 //! 5. Tolerance: MATLAB `‖z_old − z‖/‖z‖`; PyMUST divides by `‖z_old‖`, and in its first pass `z0`
-//!    aliases `z` (NumPy in-place update), so weighted/missing data get a single iteration unless
-//!    robust (found while writing this crate; not in the research notes).
+//!    aliases `z` (NumPy in-place update), so that pass stops after one iteration: non-robust
+//!    smoothing of weighted/missing data is not converged (robust passes 2-3 iterate normally).
+//!    Found while writing this crate; not in the research notes.
 //! 6. Weights: MATLAB divides W by its maximum and calls data weighted when any W < 1; PyMUST keeps
 //!    W as given and tests W ≠ 1.
 //!
 //! Where both references are arbitrary this crate chooses (documented, and applied in both
 //! flavours): S is the minimiser returned by the bounded search (SciPy/PyMUST; MATLAB keeps the S of
-//! the *last* GCV evaluation, a side effect of its nested function, within ~0.03 of it in log10);
+//! the *last* GCV evaluation, a side effect of its nested function, a point within about the
+//! search tolerance, 0.1 in log10 S, of the minimiser);
 //! the leverage `h` uses the spacing of the non-singleton axes (MATLAB takes the first N axes' spacing
 //! even if one is singleton); a zero residual when MAD = 0 gets weight 1 (MATLAB: 0/0 → weight 0);
 //! order 3 (not in MATLAB/PyMUST) uses the exact continuum leverage of [`gcv::leverage_1d_any_order`]
@@ -90,6 +93,7 @@
 
 pub mod dct;
 pub mod gcv;
+mod kernels;
 mod nearest;
 mod params;
 pub mod robust;

@@ -23,7 +23,43 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// Per-point robust weights of a (multi-component) residual field.
+/// Median of `r` over the `valid` points, gathered into `scratch` (len ≥ number of valid points).
+pub fn valid_median(r: &[f64], valid: &[bool], scratch: &mut [f64]) -> f64 {
+    let mut m = 0;
+    for (v, _) in r.iter().zip(valid).filter(|(_, ok)| **ok) {
+        scratch[m] = *v;
+        m += 1;
+    }
+    median(&mut scratch[..m])
+}
+
+/// Median absolute deviation of the residual vectors: `median over valid points of |r − mmed|₂`.
+pub fn vector_mad<R: AsRef<[f64]>>(residuals: &[R], valid: &[bool], mmed: &[f64], scratch: &mut Vec<f64>) -> f64 {
+    scratch.clear();
+    for p in (0..valid.len()).filter(|&p| valid[p]) {
+        let ad2: f64 = residuals.iter().zip(mmed).map(|(r, m)| (r.as_ref()[p] - m).powi(2)).sum();
+        scratch.push(ad2.sqrt());
+    }
+    median(scratch)
+}
+
+/// Weights of the points `offset..offset + out.len()`: `u = |r|₂ · scale`, weight `= w(u)`
+/// (`u = 0` for a zero residual, so that `scale = ∞` when MAD = 0 leaves exact fits at weight 1).
+pub fn weights_of<R: AsRef<[f64]>>(residuals: &[R], offset: usize, scale: f64, wf: WeightFunction, out: &mut [f64]) {
+    for (i, w) in out.iter_mut().enumerate() {
+        let r2: f64 = residuals.iter().map(|r| r.as_ref()[offset + i].powi(2)).sum();
+        let u = if r2 == 0.0 { 0.0 } else { r2.sqrt() * scale };
+        *w = wf.weight(u);
+    }
+}
+
+/// `1 / (1.4826 MAD) / sqrt(1 − h)`: multiplies `|r|₂` into the studentised residual.
+pub fn studentise_scale(mad: f64, h: f64) -> f64 {
+    1.0 / (MAD_TO_SIGMA * mad) / (1.0 - h).sqrt()
+}
+
+/// Per-point robust weights of a (multi-component) residual field (serial reference; the smoother
+/// runs the same steps with the per-component medians and the weights in parallel).
 ///
 /// `residuals[c]` is `y_c − z_c` at every grid point (0 where data are missing), `valid` marks the
 /// points with data. MATLAB: `MMED_c` = median of component c's residuals (marginal median),
@@ -32,45 +68,25 @@ pub fn median(v: &mut [f64]) -> f64 {
 /// `global_median` replaces the marginal medians by one median of all components' residuals
 /// (PyMUST 0.1.9). A zero residual with `MAD = 0` gets `u = 0` (weight 1), where MATLAB's 0/0 gives
 /// NaN and weight 0 (only exact fits reach this case).
-#[allow(clippy::too_many_arguments)]
 pub fn robust_weights<R: AsRef<[f64]>>(
     residuals: &[R],
     valid: &[bool],
     h: f64,
     weight_function: WeightFunction,
     global_median: bool,
-    scratch: &mut Vec<f64>,
-    mmed: &mut Vec<f64>,
     out: &mut [f64],
 ) {
-    mmed.clear();
-    mmed.resize(residuals.len(), 0.0);
-    scratch.clear();
-    if global_median {
-        for r in residuals {
-            scratch.extend(r.as_ref().iter().zip(valid).filter(|(_, ok)| **ok).map(|(v, _)| *v));
-        }
-        let m = median(scratch);
-        mmed.iter_mut().for_each(|x| *x = m);
+    let n = valid.len();
+    let mut scratch = vec![0.0; n * residuals.len()];
+    let mmed: Vec<f64> = if global_median {
+        let all: Vec<f64> = residuals.iter().flat_map(|r| r.as_ref().to_vec()).collect();
+        let valid_all: Vec<bool> = residuals.iter().flat_map(|_| valid.to_vec()).collect();
+        vec![valid_median(&all, &valid_all, &mut scratch); residuals.len()]
     } else {
-        for (m, r) in mmed.iter_mut().zip(residuals) {
-            scratch.clear();
-            scratch.extend(r.as_ref().iter().zip(valid).filter(|(_, ok)| **ok).map(|(v, _)| *v));
-            *m = median(scratch);
-        }
-    }
-    scratch.clear();
-    for p in (0..valid.len()).filter(|&p| valid[p]) {
-        let ad2: f64 = residuals.iter().zip(mmed.iter()).map(|(r, m)| (r.as_ref()[p] - m).powi(2)).sum();
-        scratch.push(ad2.sqrt());
-    }
-    let mad = median(scratch);
-    let scale = 1.0 / (MAD_TO_SIGMA * mad) / (1.0 - h).sqrt();
-    for (p, w) in out.iter_mut().enumerate() {
-        let r2: f64 = residuals.iter().map(|r| r.as_ref()[p].powi(2)).sum();
-        let u = if r2 == 0.0 { 0.0 } else { r2.sqrt() * scale };
-        *w = weight_function.weight(u);
-    }
+        residuals.iter().map(|r| valid_median(r.as_ref(), valid, &mut scratch)).collect()
+    };
+    let mad = vector_mad(residuals, valid, &mmed, &mut scratch);
+    weights_of(residuals, 0, studentise_scale(mad, h), weight_function, out);
 }
 
 #[cfg(test)]
@@ -104,11 +120,10 @@ mod tests {
         let r0: Vec<f64> = (0..101).map(|i| 1.0 + 0.01 * (i as f64 - 50.0)).collect();
         let r1: Vec<f64> = (0..101).map(|i| -1.0 + 0.02 * ((i * 37 % 101) as f64 - 50.0)).collect();
         let valid = vec![true; 101];
-        let (mut s, mut m) = (Vec::new(), Vec::new());
         let (mut wm, mut wg) = (vec![0.0; 101], vec![0.0; 101]);
         let bisquare = WeightFunction::Bisquare;
-        robust_weights(&[&r0, &r1], &valid, 0.0, bisquare, false, &mut s, &mut m, &mut wm);
-        robust_weights(&[&r0, &r1], &valid, 0.0, bisquare, true, &mut s, &mut m, &mut wg);
+        robust_weights(&[&r0, &r1], &valid, 0.0, bisquare, false, &mut wm);
+        robust_weights(&[&r0, &r1], &valid, 0.0, bisquare, true, &mut wg);
         assert!(wm[50] < wg[50] - 0.1, "marginal {} vs global {}", wm[50], wg[50]);
     }
 }

@@ -4,9 +4,10 @@
 
 use crate::dct::{DctN, DctNScratch};
 use crate::gcv::{fminbnd, leverage, leverage_1d, s_for_leverage, H_MAX, H_MIN};
+use crate::kernels::{for_each_chunk, for_each_component, gamma_sums, relax, CHUNK};
 use crate::nearest::Nearest;
-use crate::params::{Flavour, SmoothnError, SmoothnParams};
-use crate::robust::robust_weights;
+use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};
+use crate::robust;
 
 /// GCV search tolerance on log10 S (MATLAB `errp`, `optimset('TolX', 0.1)`).
 const LOG10_S_TOL: f64 = 0.1;
@@ -55,7 +56,7 @@ struct Component {
     sums: [f64; 3],
 }
 
-/// The residual buffer (`buf`), as read by [`robust_weights`].
+/// The residual buffer (`buf`), as read by the robust-weight functions.
 impl AsRef<[f64]> for Component {
     fn as_ref(&self) -> &[f64] {
         &self.buf
@@ -78,6 +79,8 @@ pub struct Smoothn {
     lambda_key: Option<(u32, Vec<f64>)>,
     gamma: Vec<f64>,
     power: Vec<f64>,
+    /// Per-chunk partial sums of [`gamma_sums`].
+    partials: Vec<[f64; 2]>,
     /// `keep` masks of the initial-guess low-pass (MATLAB, PyMUST) in spectral layout.
     keep: [Vec<bool>; 2],
     /// Squared ratio unnormalised/orthonormal DCT-II per coefficient (PyMUST GCV), on demand.
@@ -103,45 +106,6 @@ pub fn smoothn(
     let mut out = vec![0.0; data.len()];
     let report = ws.smooth(data, weights, params, &mut out)?;
     Ok((out, report))
-}
-
-/// Runs `f` on every component, on rayon threads when the `parallel` feature is on. Each
-/// component's arithmetic is sequential, so the result does not depend on the thread count.
-fn for_each_component<F: Fn(&mut Component) + Sync + Send>(comps: &mut [Component], f: F) {
-    #[cfg(feature = "parallel")]
-    if comps.len() > 1 {
-        use rayon::prelude::*;
-        comps.par_iter_mut().for_each(f);
-        return;
-    }
-    comps.iter_mut().for_each(f);
-}
-
-/// `Σ_i f(a_i, b_i)` accumulated in 4 interleaved lanes: a fixed order (deterministic) that the
-/// compiler can vectorise.
-fn lane_sum(a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let body = a.len() / 4 * 4;
-    for (a4, b4) in a[..body].chunks_exact(4).zip(b[..body].chunks_exact(4)) {
-        for l in 0..4 {
-            acc[l] += f(a4[l], b4[l]);
-        }
-    }
-    let tail: f64 = a[body..].iter().zip(&b[body..]).map(|(x, y)| f(*x, *y)).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-}
-
-/// Three-slice [`lane_sum`].
-fn lane_sum3(a: &[f64], b: &[f64], c: &[f64], f: impl Fn(f64, f64, f64) -> f64) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let body = a.len() / 4 * 4;
-    for ((a4, b4), c4) in a[..body].chunks_exact(4).zip(b[..body].chunks_exact(4)).zip(c[..body].chunks_exact(4)) {
-        for l in 0..4 {
-            acc[l] += f(a4[l], b4[l], c4[l]);
-        }
-    }
-    let tail: f64 = a[body..].iter().zip(&b[body..]).zip(&c[body..]).map(|((x, y), z)| f(*x, *y, *z)).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 impl Smoothn {
@@ -184,6 +148,7 @@ impl Smoothn {
             lambda_key: None,
             gamma: vec![0.0; n],
             power: vec![0.0; n],
+            partials: Vec::with_capacity(n.div_ceil(CHUNK)),
             keep,
             pymust_scale: Vec::new(),
             nearest: Nearest::default(),
@@ -240,6 +205,22 @@ impl Smoothn {
         params: &SmoothnParams,
         out: &mut [f64],
     ) -> Result<SmoothnReport, SmoothnError> {
+        // Run on a rayon worker so that the calling thread takes part in every parallel section
+        // (one hand-off per call instead of one per section).
+        #[cfg(feature = "parallel")]
+        if rayon::current_thread_index().is_none() && rayon::current_num_threads() > 1 {
+            return rayon::scope(|_| self.smooth_here(data, weights, params, out));
+        }
+        self.smooth_here(data, weights, params, out)
+    }
+
+    fn smooth_here(
+        &mut self,
+        data: &[f64],
+        weights: Option<&[f64]>,
+        params: &SmoothnParams,
+        out: &mut [f64],
+    ) -> Result<SmoothnReport, SmoothnError> {
         params.validate()?;
         let (n, ncomp) = (self.n, self.comps.len());
         let check = |what, got: usize, expected| {
@@ -261,36 +242,8 @@ impl Smoothn {
         }
         let pym = params.flavour == Flavour::Pymust;
 
-        // Missing values and weights (zero weight where any component is not finite).
-        let mut max_w = 0.0f64;
-        let mut nof = 0usize;
-        for p in 0..n {
-            let fin = (0..ncomp).all(|c| data[c * n + p].is_finite());
-            let wp = weights.map_or(1.0, |w| w[p]);
-            if !(wp.is_finite() && wp >= 0.0) {
-                return Err(SmoothnError::InvalidWeight { index: p, value: wp });
-            }
-            self.finite[p] = fin;
-            self.w[p] = if fin { wp } else { 0.0 };
-            nof += usize::from(fin);
-            max_w = max_w.max(self.w[p]);
-        }
-        if max_w <= 0.0 {
-            return Err(SmoothnError::NoValidData { points: n });
-        }
-        if !pym {
-            self.w.iter_mut().for_each(|w| *w /= max_w);
-        }
-        for (v, w) in self.valid.iter_mut().zip(&self.w) {
-            *v = *w > 0.0;
-        }
+        let (nof, max_w) = self.ingest(data, weights, pym)?;
         let mut is_weighted = if pym { self.w.iter().any(|w| *w != 1.0) } else { self.w.iter().any(|w| *w < 1.0) };
-        for (c, comp) in self.comps.iter_mut().enumerate() {
-            for ((y, d), fin) in comp.y.iter_mut().zip(&data[c * n..(c + 1) * n]).zip(&self.finite) {
-                *y = if *fin { *d } else { 0.0 };
-            }
-        }
-        self.robust_w.iter_mut().zip(&self.valid).for_each(|(r, v)| *r = if *v { 1.0 } else { 0.0 });
 
         let m = params.order;
         // Normalised spacing over all axes (MATLAB dI = dI/max(dI)), and over non-singleton axes.
@@ -377,26 +330,7 @@ impl Smoothn {
                 let (plan, gamma) = (&self.plan, &self.gamma);
                 for_each_component(&mut self.comps, |c| {
                     plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
-                    // Sums in 4 interleaved lanes (fixed order, vectorisable).
-                    let mut acc = [[0.0f64; 4]; 3];
-                    let tail = c.z.len() % 4;
-                    let relax = |zold: f64, zhat: f64, acc: &mut [[f64; 4]; 3], l: usize| {
-                        let znew = rf * zhat + (1.0 - rf) * zold;
-                        acc[0][l] += (zold - znew) * (zold - znew);
-                        acc[1][l] += znew * znew;
-                        acc[2][l] += zold * zold;
-                        znew
-                    };
-                    for (z4, h4) in c.z.chunks_exact_mut(4).zip(c.buf2.chunks_exact(4)) {
-                        for l in 0..4 {
-                            z4[l] = relax(z4[l], h4[l], &mut acc, l);
-                        }
-                    }
-                    let n = c.z.len();
-                    for i in n - tail..n {
-                        c.z[i] = relax(c.z[i], c.buf2[i], &mut acc, i % 4);
-                    }
-                    c.sums = acc.map(|a| (a[0] + a[1]) + (a[2] + a[3]));
+                    c.sums = relax(&mut c.z, &c.buf2, rf);
                 });
                 let sum = |i: usize| self.comps.iter().map(|c| c.sums[i]).sum::<f64>();
                 // MATLAB: ‖z_old − z‖/‖z‖ (new iterate); PyMUST divides by the old iterate, and in its
@@ -409,27 +343,7 @@ impl Smoothn {
             if !params.robust {
                 break;
             }
-            let h = if pym {
-                match m {
-                    1 => 1.0 / (1.0 + 8.0 * s / self.spacing[0]).sqrt(),
-                    _ => leverage_1d(s / self.spacing[0].powi(4), 2),
-                }
-            } else {
-                leverage(s, m, &self.spacing_ns)
-            };
-            for_each_component(&mut self.comps, |c| {
-                for ((b, y), z) in c.buf.iter_mut().zip(&c.y).zip(&c.z) {
-                    *b = y - z;
-                }
-            });
-            let (wf, scratch, medians) = (params.weight_function, &mut self.scratch, &mut self.medians);
-            robust_weights(&self.comps, &self.finite, h, wf, pym, scratch, medians, &mut self.robust_w);
-            for ((wt, w), r) in self.wtot.iter_mut().zip(&self.w).zip(&mut self.robust_w) {
-                if *w == 0.0 {
-                    *r = 0.0;
-                }
-                *wt = w * *r;
-            }
+            self.reweight(s, m, params.weight_function, pym);
             is_weighted = true;
         }
 
@@ -452,6 +366,86 @@ impl Smoothn {
             s_bounds,
             s_at_bound: auto && (near(s_bounds[0]) || near(s_bounds[1])),
         })
+    }
+
+    /// Copies the data (missing values → 0), marks finite points, checks and stores the weights
+    /// (0 where data are missing; divided by their maximum for MATLAB). Returns (finite points, max W).
+    fn ingest(&mut self, data: &[f64], weights: Option<&[f64]>, pym: bool) -> Result<(usize, f64), SmoothnError> {
+        let (n, ncomp) = (self.n, self.comps.len());
+        // Missing values and weights (zero weight where any component is not finite).
+        let mut max_w = 0.0f64;
+        let mut nof = 0usize;
+        for p in 0..n {
+            let fin = (0..ncomp).all(|c| data[c * n + p].is_finite());
+            let wp = weights.map_or(1.0, |w| w[p]);
+            if !(wp.is_finite() && wp >= 0.0) {
+                return Err(SmoothnError::InvalidWeight { index: p, value: wp });
+            }
+            self.finite[p] = fin;
+            self.w[p] = if fin { wp } else { 0.0 };
+            nof += usize::from(fin);
+            max_w = max_w.max(self.w[p]);
+        }
+        if max_w <= 0.0 {
+            return Err(SmoothnError::NoValidData { points: n });
+        }
+        if !pym {
+            self.w.iter_mut().for_each(|w| *w /= max_w);
+        }
+        for (v, w) in self.valid.iter_mut().zip(&self.w) {
+            *v = *w > 0.0;
+        }
+        for (c, comp) in self.comps.iter_mut().enumerate() {
+            for ((y, d), fin) in comp.y.iter_mut().zip(&data[c * n..(c + 1) * n]).zip(&self.finite) {
+                *y = if *fin { *d } else { 0.0 };
+            }
+        }
+        self.robust_w.iter_mut().zip(&self.valid).for_each(|(r, v)| *r = if *v { 1.0 } else { 0.0 });
+        Ok((nof, max_w))
+    }
+
+    /// Robust step: weights from the studentised residuals of the current fit, `Wtot = W · w(u)`.
+    fn reweight(&mut self, s: f64, m: u32, wf: WeightFunction, pym: bool) {
+        let h = if pym {
+            match m {
+                1 => 1.0 / (1.0 + 8.0 * s / self.spacing[0]).sqrt(),
+                _ => leverage_1d(s / self.spacing[0].powi(4), 2),
+            }
+        } else {
+            leverage(s, m, &self.spacing_ns)
+        };
+        // Residuals and (MATLAB) per-component medians, in parallel.
+        let finite = &self.finite;
+        for_each_component(&mut self.comps, |c| {
+            for ((b, y), z) in c.buf.iter_mut().zip(&c.y).zip(&c.z) {
+                *b = y - z;
+            }
+            if !pym {
+                c.sums[0] = robust::valid_median(&c.buf, finite, &mut c.buf2);
+            }
+        });
+        self.medians.clear();
+        if pym {
+            // One median of every component's residuals (PyMUST).
+            self.scratch.clear();
+            for c in &self.comps {
+                self.scratch.extend(c.buf.iter().zip(finite).filter(|(_, ok)| **ok).map(|(v, _)| *v));
+            }
+            let m = robust::median(&mut self.scratch);
+            self.medians.resize(self.comps.len(), m);
+        } else {
+            self.medians.extend(self.comps.iter().map(|c| c.sums[0]));
+        }
+        let mad = robust::vector_mad(&self.comps, finite, &self.medians, &mut self.scratch);
+        let scale = robust::studentise_scale(mad, h);
+        let comps = &self.comps;
+        for_each_chunk(&mut self.robust_w, |i, out| robust::weights_of(comps, i * CHUNK, scale, wf, out));
+        for ((wt, w), r) in self.wtot.iter_mut().zip(&self.w).zip(&mut self.robust_w) {
+            if *w == 0.0 {
+                *r = 0.0;
+            }
+            *wt = w * *r;
+        }
     }
 
     /// Λ^m in spectral layout: `Λ(k) = Σ_a (2 − 2cos(π k_a / n_a)) / dI_a²`, cached per (m, dI).
@@ -493,18 +487,15 @@ impl Smoothn {
         }
         let score = |p: f64| -> f64 {
             let s = 10f64.powf(p);
-            for (g, l) in self.gamma.iter_mut().zip(&self.lambda_m) {
-                *g = 1.0 / (1.0 + s * l);
-            }
-            let tr_h = lane_sum(&self.gamma, &self.gamma, |g, _| g);
+            let power = fast_rss.then_some(self.power.as_slice());
+            let [tr_h, fast] = gamma_sums(&mut self.gamma, &self.lambda_m, power, s, &mut self.partials);
             let rss = if fast_rss {
-                lane_sum(&self.gamma, &self.power, |g, pw| pw * (g - 1.0) * (g - 1.0))
+                fast
             } else {
                 // Σ over valid points of Wtot (y − ŷ)²; Wtot = 0 (exactly) where data are missing.
                 let (plan, gamma, wtot) = (&self.plan, &self.gamma, &self.wtot);
                 for_each_component(&mut self.comps, |c| {
-                    plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
-                    c.sums[0] = lane_sum3(&c.y, &c.buf2, wtot, |y, yh, w| w * (y - yh) * (y - yh));
+                    c.sums[0] = plan.weighted_rss(&c.dcty, Some(gamma), &c.y, wtot, &mut c.buf2, &mut c.dct);
                 });
                 self.comps.iter().map(|c| c.sums[0]).sum()
             };

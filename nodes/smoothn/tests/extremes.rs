@@ -199,16 +199,18 @@ fn a_reused_workspace_gives_the_same_result_as_a_fresh_one() {
 
 #[test]
 fn results_are_bit_identical_for_any_thread_count() {
-    // Three components (rayon splits them over threads), missing values, robust, automatic S.
-    let n = 30 * 26;
-    let truth: Vec<f64> = smooth_field(30, 26).into_iter().chain((0..n).map(|p| (p as f64 * 0.01).cos())).collect();
+    // Three components (rayon splits them over threads), missing values, robust, automatic S, and a
+    // grid larger than one chunk of the element-wise kernels (4096 points) so those split too.
+    let (ny, nx) = (72, 64);
+    let n = ny * nx;
+    let truth: Vec<f64> = smooth_field(ny, nx).into_iter().chain((0..n).map(|p| (p as f64 * 0.01).cos())).collect();
     let (mut y, _) = corrupt(&truth, 3, 0.1, 0.1, 5);
     for p in [5, 99, 400, 401, 402] {
         y[2 * n + p] = f64::NAN;
     }
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| smoothn(&y, &[30, 26], 3, None, &robust_auto()).unwrap())
+        pool.install(|| smoothn(&y, &[ny, nx], 3, None, &robust_auto()).unwrap())
     };
     let (z1, r1) = run(1);
     for threads in [2, 3, 4] {

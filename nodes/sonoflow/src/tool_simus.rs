@@ -40,7 +40,8 @@ fn parse_file<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> 
     match ext.as_str() {
         "json" => {
             let de = &mut serde_json::Deserializer::from_str(&text);
-            serde_path_to_error::deserialize(de).map_err(|e| anyhow::anyhow!("{}: {} ({})", path.display(), e.inner(), e.path()))
+            serde_path_to_error::deserialize(de)
+                .map_err(|e| anyhow::anyhow!("{}: {} ({})", path.display(), e.inner(), e.path()))
         }
         "toml" => toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
         _ => anyhow::bail!("{}: use a .json or .toml file", path.display()),

@@ -1,5 +1,5 @@
 //! Shared helpers of the integration tests: a tiny .npy reader and scene loading.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
 

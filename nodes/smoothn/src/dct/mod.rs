@@ -1,0 +1,467 @@
+//! Orthonormal DCT-II and its inverse (DCT-III) in one and N dimensions, computed with an FFT.
+//!
+//! One line of length `n` uses Makhoul's even/odd reordering (J. Makhoul 1980, "A fast cosine
+//! transform in one and two dimensions", IEEE Trans. ASSP 28:27-34): `v = [x0, x2, x4, …, x5, x3, x1]`,
+//! `V = FFT(v)`, `X_k = Re(e^{-iπk/2n} V_k)`, O(n log n) for every length, not only powers of two
+//! (`rustfft`). Both transforms are real-linear, so two real lines travel as the real and imaginary
+//! parts of one complex line through one complex FFT of length n, with
+//! `X_k = (e^{-iπk/2n} V_k + e^{iπk/2n} V_(n−k)) / 2` separating them again; lines are transformed in
+//! blocks of [`BLOCK`] (one batched FFT call). Scaling is orthonormal (MATLAB `dct`,
+//! `scipy.fft.dct(norm="ortho")`): `X_0 = sqrt(1/n) Σ x_j`,
+//! `X_k = sqrt(2/n) Σ_j x_j cos(πk(2j+1)/2n)`, so the inverse is the transpose.
+//!
+//! The N-D transform applies the 1-D transform along every non-singleton axis. Lines along the
+//! last (contiguous) axis are transformed and written transposed, which rotates the axes; after the
+//! forward transform the coefficients are therefore stored in the *spectral layout*
+//! `(a1, a2, …, a(K-1), a0)` of the K non-singleton axes `a0 … a(K-1)` (see [`DctN::spectral_axes`]).
+//! The inverse transform takes that layout and returns the spatial (row-major) one. Element-wise
+//! work in the DCT domain is layout-agnostic; [`DctN::spectral_indices`] maps each coefficient to
+//! its per-axis frequency indices.
+//!
+//! A plan ([`DctN`]) is immutable and shareable across threads; each thread brings its own
+//! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
+
+mod nd;
+
+use std::sync::Arc;
+
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+
+pub use nd::{DctN, DctNScratch};
+
+type C64 = Complex<f64>;
+
+/// Lines transformed together (in pairs, through one batched FFT call).
+pub const BLOCK: usize = 8;
+
+/// Scratch buffers of a block of 1-D transforms (sized for the longest line of a plan).
+pub struct LineScratch {
+    c1: Vec<C64>,
+    c2: Vec<C64>,
+    fft: Vec<C64>,
+    /// A line of zeros (partner of an odd last line) and a line to discard its output into.
+    zeros: Vec<f64>,
+    sink: Vec<f64>,
+}
+
+impl LineScratch {
+    fn new(max_len: usize, fft_len: usize) -> Self {
+        let c = BLOCK / 2 * max_len;
+        Self {
+            c1: vec![C64::default(); c],
+            c2: vec![C64::default(); c],
+            fft: vec![C64::default(); fft_len],
+            zeros: vec![0.0; max_len],
+            sink: vec![0.0; max_len],
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        (self.c1.capacity() + self.c2.capacity() + self.fft.capacity()) * std::mem::size_of::<C64>()
+            + (self.zeros.capacity() + self.sink.capacity()) * std::mem::size_of::<f64>()
+    }
+}
+
+/// Orthonormal DCT-II / DCT-III of one length. Two real lines travel as the real and imaginary parts
+/// of one complex line (both transforms are real-linear) through one complex FFT of length n.
+pub struct Dct1d {
+    n: usize,
+    fwd: Arc<dyn Fft<f64>>,
+    inv: Arc<dyn Fft<f64>>,
+    /// `a_k = σ_k e^{-iθ_k} / 2`, θ_k = πk/2n: `X_k = a_k V_k + conj(a_k) V_(n−k)` (V_n = V_0).
+    a: Vec<C64>,
+    /// Real and imaginary parts of `a`.
+    a_re: Vec<f64>,
+    a_im: Vec<f64>,
+    /// `b_k = e^{iθ_k} / (σ_k n)`: `V_k = b_k (X_k − i X_(n−k))` (X_n = 0), 1/n of the inverse FFT included.
+    b: Vec<C64>,
+    /// Real and imaginary parts of `b`.
+    b_re: Vec<f64>,
+    b_im: Vec<f64>,
+}
+
+/// Destination of the two real lines of a pair.
+trait PairSink {
+    /// Stores element `k` of line a and of line b.
+    fn put(&mut self, k: usize, a: f64, b: f64);
+}
+
+/// Two adjacent columns of a transposed output: element k at `base + k·stride` (+1 for line b).
+struct Columns<'a> {
+    dst: &'a mut [f64],
+    base: usize,
+    stride: usize,
+}
+
+impl PairSink for Columns<'_> {
+    #[inline(always)]
+    fn put(&mut self, k: usize, a: f64, b: f64) {
+        let i = self.base + k * self.stride;
+        self.dst[i] = a;
+        self.dst[i + 1] = b;
+    }
+}
+
+/// One column (an odd last line; line b is discarded).
+struct Column<'a> {
+    dst: &'a mut [f64],
+    base: usize,
+    stride: usize,
+}
+
+impl PairSink for Column<'_> {
+    #[inline(always)]
+    fn put(&mut self, k: usize, a: f64, _: f64) {
+        self.dst[self.base + k * self.stride] = a;
+    }
+}
+
+impl Dct1d {
+    /// Plans a transform of length `n ≥ 1`, sharing FFT plans through `planner`.
+    pub fn with_planner(n: usize, planner: &mut FftPlanner<f64>) -> Self {
+        let n = n.max(1);
+        let nf = n as f64;
+        let sigma = |k: usize| if k == 0 { (1.0 / nf).sqrt() } else { (2.0 / nf).sqrt() };
+        let theta = |k: usize| std::f64::consts::PI * k as f64 / (2.0 * nf);
+        let a: Vec<C64> = (0..n).map(|k| C64::from_polar(0.5 * sigma(k), -theta(k))).collect();
+        let (a_re, a_im) = (a.iter().map(|c| c.re).collect(), a.iter().map(|c| c.im).collect());
+        let b: Vec<C64> = (0..n).map(|k| C64::from_polar(1.0 / (sigma(k) * nf), theta(k))).collect();
+        let (b_re, b_im) = (b.iter().map(|c| c.re).collect(), b.iter().map(|c| c.im).collect());
+        Self { n, fwd: planner.plan_fft_forward(n), inv: planner.plan_fft_inverse(n), a, a_re, a_im, b, b_re, b_im }
+    }
+
+    /// Plans a transform of length `n ≥ 1` with a private FFT planner.
+    pub fn new(n: usize) -> Self {
+        Self::with_planner(n, &mut FftPlanner::new())
+    }
+
+    /// Transform length.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Always false (a plan has length ≥ 1).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    fn fft_scratch_len(&self) -> usize {
+        self.fwd.get_outofplace_scratch_len().max(self.inv.get_outofplace_scratch_len())
+    }
+
+    /// Scratch buffers for this length.
+    pub fn make_scratch(&self) -> LineScratch {
+        LineScratch::new(self.n, self.fft_scratch_len())
+    }
+
+    /// Orthonormal DCT-II of `x` into `y` (both of length [`Self::len`]).
+    pub fn forward(&self, x: &[f64], y: &mut [f64], s: &mut LineScratch) {
+        self.load(&x[..self.n], None, false, s);
+        self.store_block(&mut y[..self.n], false, s);
+    }
+
+    /// Orthonormal DCT-III (inverse of [`Self::forward`]) of `y` into `x`.
+    pub fn inverse(&self, y: &[f64], x: &mut [f64], s: &mut LineScratch) {
+        self.load(&y[..self.n], None, true, s);
+        self.store_block(&mut x[..self.n], true, s);
+    }
+
+    /// In-place orthonormal DCT-II.
+    pub fn forward_in_place(&self, xy: &mut [f64], s: &mut LineScratch) {
+        self.load(&xy[..self.n], None, false, s);
+        self.store_block(&mut xy[..self.n], false, s);
+    }
+
+    /// In-place orthonormal DCT-III.
+    pub fn inverse_in_place(&self, xy: &mut [f64], s: &mut LineScratch) {
+        self.load(&xy[..self.n], None, true, s);
+        self.store_block(&mut xy[..self.n], true, s);
+    }
+
+    /// Packs the `src.len()/n ≤ BLOCK` contiguous lines of `src` in pairs (line 2p real, 2p+1
+    /// imaginary part of complex line p; an odd last line pairs with zeros; `weight` multiplies
+    /// element-wise), prepares them and runs the batched FFT. Forward: Makhoul reordering
+    /// `v = [x0, x2, …, x3, x1]`. Inverse: `V_k = b_k (X_k − i X_(n−k))`.
+    fn load(&self, src: &[f64], weight: Option<&[f64]>, inverse: bool, s: &mut LineScratch) {
+        let n = self.n;
+        let lines = src.len() / n;
+        let pairs = lines.div_ceil(2);
+        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let zeros = &zeros[..n];
+        fn pick<'a>(buf: &'a [f64], l: usize, lines: usize, zeros: &'a [f64]) -> &'a [f64] {
+            let n = zeros.len();
+            if l < lines {
+                &buf[l * n..(l + 1) * n]
+            } else {
+                zeros
+            }
+        }
+        let line = |buf, l| pick(buf, l, lines, zeros);
+        for (p, v) in c1.chunks_exact_mut(n).take(pairs).enumerate() {
+            let (xa, xb) = (line(src, 2 * p), line(src, 2 * p + 1));
+            match (inverse, weight) {
+                (false, _) => self.pack_forward(v, xa, xb),
+                (true, None) => self.pack_inverse::<false>(v, xa, xb, xa, xb),
+                (true, Some(w)) => self.pack_inverse::<true>(v, xa, xb, line(w, 2 * p), line(w, 2 * p + 1)),
+            }
+        }
+        let plan = if inverse { &self.inv } else { &self.fwd };
+        plan.process_outofplace_with_scratch(&mut c1[..pairs * n], &mut c2[..pairs * n], fft);
+    }
+
+    /// `v_q = x_2q` (q < ⌈n/2⌉), `v_(n−1−q) = x_2q+1`, lines a and b as real and imaginary parts.
+    fn pack_forward(&self, v: &mut [C64], xa: &[f64], xb: &[f64]) {
+        let n = self.n;
+        let (v, xa, xb) = (&mut v[..n], &xa[..n], &xb[..n]);
+        for q in 0..n / 2 {
+            v[q] = C64::new(xa[2 * q], xb[2 * q]);
+            v[n - 1 - q] = C64::new(xa[2 * q + 1], xb[2 * q + 1]);
+        }
+        if n & 1 == 1 {
+            v[n / 2] = C64::new(xa[n - 1], xb[n - 1]);
+        }
+    }
+
+    /// `U = X^(a) g^(a) + i X^(b) g^(b)`; `V_k = b_k (U_k − i U_(n−k))`,
+    /// `V_(n−k) = conj(b_k) (U_k + i U_(n−k))`, `V_0 = b_0 U_0`, and for even n
+    /// `V_(n/2) = b (1 − i) U_(n/2)` with `b (1 − i) = √2/(σ n)` real.
+    fn pack_inverse<const WEIGHTED: bool>(&self, v: &mut [C64], xa: &[f64], xb: &[f64], ga: &[f64], gb: &[f64]) {
+        let n = self.n;
+        let (v, xa, xb, ga, gb) = (&mut v[..n], &xa[..n], &xb[..n], &ga[..n], &gb[..n]);
+        let u = |k: usize| {
+            if WEIGHTED {
+                C64::new(xa[k] * ga[k], xb[k] * gb[k])
+            } else {
+                C64::new(xa[k], xb[k])
+            }
+        };
+        let (b0, bh) = (self.b[0].re, self.b[n / 2]);
+        v[0] = u(0) * b0;
+        if n & 1 == 0 {
+            v[n / 2] = u(n / 2) * (bh.re + bh.im);
+        }
+        // Pairs (k, n − k), k = 1 … m, over equal-length sub-slices (no bounds checks; SoA twiddles).
+        let m = (n - 1) / 2;
+        let (lo, hi) = v[1..].split_at_mut(n - 1 - m);
+        let (lo, hi) = (&mut lo[..m], &mut hi[..m]);
+        let (br, bi) = (&self.b_re[1..=m], &self.b_im[1..=m]);
+        let (xal, xah, xbl, xbh) = (&xa[1..=m], &xa[n - m..], &xb[1..=m], &xb[n - m..]);
+        let (gal, gah, gbl, gbh) = (&ga[1..=m], &ga[n - m..], &gb[1..=m], &gb[n - m..]);
+        // Two passes with forward stores (the reversed partner is read), which vectorise.
+        let load = |j: usize, r: usize| {
+            if WEIGHTED {
+                (xal[j] * gal[j], xbl[j] * gbl[j], xah[r] * gah[r], xbh[r] * gbh[r])
+            } else {
+                (xal[j], xbl[j], xah[r], xbh[r])
+            }
+        };
+        for j in 0..m {
+            // V_k = b (U − iR).
+            let (ur, ui, rr, ri) = load(j, m - 1 - j);
+            let (s1, s2) = (ur + ri, ui - rr);
+            lo[j] = C64::new(br[j] * s1 - bi[j] * s2, br[j] * s2 + bi[j] * s1);
+        }
+        for (t, h) in hi.iter_mut().enumerate() {
+            // V_(n−k) = conj(b) (U + iR), k = m − t.
+            let j = m - 1 - t;
+            let (ur, ui, rr, ri) = load(j, t);
+            let (d1, d2) = (ur - ri, ui + rr);
+            *h = C64::new(br[j] * d1 + bi[j] * d2, br[j] * d2 - bi[j] * d1);
+        }
+    }
+
+    /// DCT-II coefficients of the pair spectrum `v` into lines `ya` (real part) and `yb`:
+    /// `X_k = P + Q`, `X_(n−k) = i (P − Q)` with `P = a_k V_k`, `Q = conj(a_k) V_(n−k)`.
+    fn unpack_forward(&self, v: &[C64], out: &mut impl PairSink) {
+        let n = self.n;
+        let (v, a) = (&v[..n], &self.a[..n]);
+        let x0 = v[0] * (2.0 * a[0].re);
+        out.put(0, x0.re, x0.im);
+        for k in 1..n.div_ceil(2) {
+            let (pk, qk) = (a[k] * v[k], a[k].conj() * v[n - k]);
+            let (sum, d) = (pk + qk, pk - qk);
+            out.put(k, sum.re, sum.im);
+            out.put(n - k, -d.im, d.re);
+        }
+        if n & 1 == 0 {
+            let h = n / 2;
+            let xh = v[h] * (2.0 * a[h].re);
+            out.put(h, xh.re, xh.im);
+        }
+    }
+
+    /// Samples of the pair from the inverse FFT output `v`: `x_2q = v_q`, `x_2q+1 = v_(n−1−q)`.
+    fn unpack_inverse(&self, v: &[C64], out: &mut impl PairSink) {
+        let n = self.n;
+        let v = &v[..n];
+        for q in 0..n / 2 {
+            let (e, o) = (v[q], v[n - 1 - q]);
+            out.put(2 * q, e.re, e.im);
+            out.put(2 * q + 1, o.re, o.im);
+        }
+        if n & 1 == 1 {
+            let e = v[n / 2];
+            out.put(n - 1, e.re, e.im);
+        }
+    }
+
+    /// Transforms the rows (length n) of `src` into `dst`: row-major, or transposed (n × rows; the
+    /// two lines of a pair land side by side in each output row).
+    fn rows(
+        &self,
+        src: &[f64],
+        weight: Option<&[f64]>,
+        dst: &mut [f64],
+        inverse: bool,
+        transpose: bool,
+        s: &mut LineScratch,
+    ) {
+        let n = self.n;
+        let rows = src.len() / n;
+        for (b, lines) in src.chunks(BLOCK * n).enumerate() {
+            let r0 = b * BLOCK;
+            let nb = lines.len() / n;
+            self.load(lines, weight.map(|w| &w[r0 * n..(r0 + nb) * n]), inverse, s);
+            if !transpose {
+                self.store_block(&mut dst[r0 * n..(r0 + nb) * n], inverse, s);
+                continue;
+            }
+            for (p, v) in s.c2.chunks_exact(n).take(nb.div_ceil(2)).enumerate() {
+                let r = r0 + 2 * p;
+                let dst = &mut dst[..];
+                match (r + 1 < r0 + nb, inverse) {
+                    (true, false) => self.unpack_forward(v, &mut Columns { dst, base: r, stride: rows }),
+                    (true, true) => self.unpack_inverse(v, &mut Columns { dst, base: r, stride: rows }),
+                    (false, false) => self.unpack_forward(v, &mut Column { dst, base: r, stride: rows }),
+                    (false, true) => self.unpack_inverse(v, &mut Column { dst, base: r, stride: rows }),
+                }
+            }
+        }
+    }
+
+    /// Writes the lines of the last load (`out.len()/n` of them) into `out`, row-major; the partner
+    /// of an odd last line goes to scratch.
+    fn store_block(&self, out: &mut [f64], inverse: bool, s: &mut LineScratch) {
+        let n = self.n;
+        let LineScratch { c2, sink, .. } = s;
+        for (pair, v) in out.chunks_mut(2 * n).zip(c2.chunks_exact(n)) {
+            let (a, b) = pair.split_at_mut(n);
+            let b = if b.is_empty() { &mut sink[..n] } else { b };
+            if inverse {
+                self.unpack_inverse_rows(v, a, b);
+            } else {
+                self.unpack_forward_rows(v, a, b);
+            }
+        }
+    }
+
+    /// [`Self::unpack_forward`] into two row-major lines (index loops over equal-length slices).
+    fn unpack_forward_rows(&self, v: &[C64], ya: &mut [f64], yb: &mut [f64]) {
+        let n = self.n;
+        let (v, ya, yb) = (&v[..n], &mut ya[..n], &mut yb[..n]);
+        let (a0, ah) = (self.a[0].re, self.a[n / 2].re);
+        let x0 = v[0] * (2.0 * a0);
+        (ya[0], yb[0]) = (x0.re, x0.im);
+        if n & 1 == 0 {
+            let xh = v[n / 2] * (2.0 * ah);
+            (ya[n / 2], yb[n / 2]) = (xh.re, xh.im);
+        }
+        let m = (n - 1) / 2;
+        let (vl, vh) = (&v[1..=m], &v[n - m..]);
+        let (al, ar) = (&self.a_re[1..=m], &self.a_im[1..=m]);
+        let (yal, yah) = ya[1..].split_at_mut(n - 1 - m);
+        let (ybl, ybh) = yb[1..].split_at_mut(n - 1 - m);
+        let (yal, yah, ybl, ybh) = (&mut yal[..m], &mut yah[..m], &mut ybl[..m], &mut ybh[..m]);
+        for j in 0..m {
+            let r = m - 1 - j;
+            let (p, q) = (vl[j], vh[r]);
+            // P = a V_k, Q = conj(a) V_(n−k); X_k = P + Q, X_(n−k) = i (P − Q).
+            let (pr, pi) = (al[j] * p.re - ar[j] * p.im, al[j] * p.im + ar[j] * p.re);
+            let (qr, qi) = (al[j] * q.re + ar[j] * q.im, al[j] * q.im - ar[j] * q.re);
+            (yal[j], ybl[j]) = (pr + qr, pi + qi);
+            (yah[r], ybh[r]) = (-(pi - qi), pr - qr);
+        }
+    }
+
+    /// [`Self::unpack_inverse`] into two row-major lines.
+    fn unpack_inverse_rows(&self, v: &[C64], xa: &mut [f64], xb: &mut [f64]) {
+        let n = self.n;
+        let h = n / 2;
+        let (lo, hi) = v[..n].split_at(n - h);
+        let hi = &hi[..h];
+        let (xa, xb) = (&mut xa[..n], &mut xb[..n]);
+        for q in 0..h {
+            let (e, o) = (lo[q], hi[h - 1 - q]);
+            (xa[2 * q], xb[2 * q]) = (e.re, e.im);
+            (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
+        }
+        if n & 1 == 1 {
+            (xa[n - 1], xb[n - 1]) = (lo[h].re, lo[h].im);
+        }
+    }
+
+    /// Inverse-transforms the rows of `src` (times `weight`) and returns `Σ w (y − x)²` against the
+    /// rows of `y` with weights `w`, without storing the samples.
+    fn rows_rss(&self, src: &[f64], weight: Option<&[f64]>, y: &[f64], w: &[f64], s: &mut LineScratch) -> f64 {
+        let n = self.n;
+        let mut total = 0.0;
+        for (b, lines) in src.chunks(BLOCK * n).enumerate() {
+            let r0 = b * BLOCK;
+            let nb = lines.len() / n;
+            self.load(lines, weight.map(|w| &w[r0 * n..(r0 + nb) * n]), true, s);
+            for (p, v) in s.c2.chunks_exact(n).take(nb.div_ceil(2)).enumerate() {
+                let (ra, pair) = (r0 + 2 * p, (nb - 2 * p).min(2));
+                let rb = if pair == 2 { ra + 1 } else { ra };
+                let (ya, yb, wa, wb) = (&y[ra * n..][..n], &y[rb * n..][..n], &w[ra * n..][..n], &w[rb * n..][..n]);
+                total += if pair == 2 {
+                    self.rss_pair::<true>(v, [ya, yb], [wa, wb])
+                } else {
+                    self.rss_pair::<false>(v, [ya, yb], [wa, wb])
+                };
+            }
+        }
+        total
+    }
+
+    /// `Σ w (y − x)²` of the inverse samples `x` of a pair (`BOTH`: line b too) against data rows
+    /// `y` and weights `w`; positions 2q and 2q+1 come from `v_q` and `v_(n−1−q)`. Four running sums
+    /// (line × even/odd position), added in a fixed order.
+    fn rss_pair<const BOTH: bool>(&self, v: &[C64], y: [&[f64]; 2], w: [&[f64]; 2]) -> f64 {
+        let n = self.n;
+        let h = n / 2;
+        let (lo, hi) = v[..n].split_at(n - h);
+        let hi = &hi[..h];
+        let (ya, yb, wa, wb) = (&y[0][..n], &y[1][..n], &w[0][..n], &w[1][..n]);
+        let mut acc = [0.0f64; 4];
+        for q in 0..h {
+            let (e, o) = (lo[q], hi[h - 1 - q]);
+            let (d0, d1) = (ya[2 * q] - e.re, ya[2 * q + 1] - o.re);
+            acc[0] += wa[2 * q] * d0 * d0;
+            acc[1] += wa[2 * q + 1] * d1 * d1;
+            if BOTH {
+                let (d2, d3) = (yb[2 * q] - e.im, yb[2 * q + 1] - o.im);
+                acc[2] += wb[2 * q] * d2 * d2;
+                acc[3] += wb[2 * q + 1] * d3 * d3;
+            }
+        }
+        if n & 1 == 1 {
+            let e = lo[h];
+            let d = ya[n - 1] - e.re;
+            acc[0] += wa[n - 1] * d * d;
+            if BOTH {
+                let d = yb[n - 1] - e.im;
+                acc[2] += wb[n - 1] * d * d;
+            }
+        }
+        (acc[0] + acc[1]) + (acc[2] + acc[3])
+    }
+
+    /// Transforms the rows of `data` in place.
+    fn rows_in_place(&self, data: &mut [f64], inverse: bool, s: &mut LineScratch) {
+        for lines in data.chunks_mut(BLOCK * self.n) {
+            self.load(lines, None, inverse, s);
+            self.store_block(lines, inverse, s);
+        }
+    }
+}
