@@ -1,0 +1,134 @@
+//! Vector Doppler: (vx, vz) per pixel by least squares on the projection geometry
+//! (Shahriari & Garcia 2018 eq. 20; Yiu et al. 2014; Jensen et al. 2016 eq. 4).
+//!
+//! A Doppler velocity measured with transmit direction θt and receive direction θr (angles from
+//! the z axis, positive towards +x) is the projection of the velocity on the bisector:
+//! `v_D = a·v`, `a = −(sin θt + sin θr, cos θt + cos θr)/2` with v_D positive toward the probe
+//! (MUST's sign, [`crate::doppler`]). Derivation: the round-trip delay of a scatterer at p is
+//! `τ = (d_TX + d_RX)/c`; moving it by v·T changes τ by `(û_t + û_r)·v T/c` where û_t = (sin θt,
+//! cos θt) is the transmit propagation direction and û_r = (sin θr, cos θr) the direction from
+//! the receive aperture to p; v_D = −c Δτ/(2T).
+//!
+//! With J ≥ 2 angles the per-pixel normal equations `(AᵀA) v = Aᵀ v_D` are solved (J = 2 is the
+//! exact solve). For θt = 0 and θr = ±φ this gives `vx = (v_D(−φ) − v_D(+φ))/sin φ`,
+//! `vz = −(v_D(−φ) + v_D(+φ))/(1 + cos φ)`, i.e. the paper's eq. 20 with its Doppler values of
+//! the opposite sign (paper: positive = away from the probe along the bisector, +z downwards).
+//! The per-pixel projections of a [`crate::DasPlan`] ([`crate::DasPlan::projection`]) account
+//! for the actual (possibly clipped) aperture; the nominal ones assume an ideal plane wave.
+
+use crate::doppler::flags;
+use crate::error::{check_len, invalid, BeamformError, Result};
+
+/// Projection vector `a` for transmit tilt `tx_tilt` and receive angle `rx_angle` (rad).
+pub fn nominal_projection(tx_tilt: f64, rx_angle: f64) -> [f64; 2] {
+    [-(tx_tilt.sin() + rx_angle.sin()) / 2.0, -(tx_tilt.cos() + rx_angle.cos()) / 2.0]
+}
+
+/// The projection geometry of one Doppler map.
+#[derive(Clone, Copy, Debug)]
+pub enum Projection<'a> {
+    /// Ideal plane-wave geometry, the same for every pixel.
+    Nominal {
+        /// Transmit tilt (rad).
+        tx_tilt: f64,
+        /// Receive angle (rad).
+        rx_angle: f64,
+    },
+    /// One vector per pixel (e.g. [`crate::DasPlan::projection`]).
+    PerPixel(&'a [[f32; 2]]),
+}
+
+/// One Doppler map entering the vector solve.
+#[derive(Clone, Copy, Debug)]
+pub struct VectorInput<'a> {
+    /// Doppler velocity per pixel (m/s, positive toward the probe).
+    pub velocity: &'a [f32],
+    /// [`flags`] per pixel (pixels with NO_ESTIMATE are left out of the solve).
+    pub flags: &'a [u8],
+    /// Geometry.
+    pub projection: Projection<'a>,
+}
+
+/// Result of the vector solve (row-major maps).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VectorField {
+    /// Lateral velocity (m/s, +x).
+    pub vx: Vec<f32>,
+    /// Axial velocity (m/s, +z = deeper, away from the probe).
+    pub vz: Vec<f32>,
+    /// [`flags`]: NO_ESTIMATE when fewer than two usable maps or an ill-conditioned geometry
+    /// (vx = vz = 0 then); ALIASING if any map used is flagged.
+    pub flags: Vec<u8>,
+}
+
+/// Relative determinant below which the 2×2 normal matrix is considered singular.
+const MIN_REL_DET: f64 = 1e-6;
+
+/// Solves (vx, vz) for every pixel from `inputs` (all of the same length `n_pixels`).
+pub fn solve_vector(inputs: &[VectorInput<'_>], out: &mut VectorField) -> Result<()> {
+    let first = inputs.first().ok_or_else(|| invalid("vector inputs", 0, "at least two Doppler maps"))?;
+    if inputs.len() < 2 {
+        return Err(invalid("vector inputs", inputs.len(), "at least two Doppler maps"));
+    }
+    let n = first.velocity.len();
+    for inp in inputs {
+        check_len("vector input velocity", inp.velocity.len(), n)?;
+        check_len("vector input flags", inp.flags.len(), n)?;
+        match inp.projection {
+            Projection::PerPixel(a) => check_len("vector input projection", a.len(), n)?,
+            Projection::Nominal { tx_tilt, rx_angle } => {
+                if !(tx_tilt.is_finite() && rx_angle.is_finite()) {
+                    return Err(BeamformError::InvalidParameter {
+                        field: "vector projection angles",
+                        value: format!("{tx_tilt}, {rx_angle}"),
+                        allowed: "finite (rad)",
+                    });
+                }
+            }
+        }
+    }
+    out.vx.resize(n, 0.0);
+    out.vz.resize(n, 0.0);
+    out.flags.resize(n, 0);
+    let nominal: Vec<[f64; 2]> = inputs
+        .iter()
+        .map(|i| match i.projection {
+            Projection::Nominal { tx_tilt, rx_angle } => nominal_projection(tx_tilt, rx_angle),
+            Projection::PerPixel(_) => [0.0, 0.0],
+        })
+        .collect();
+    for p in 0..n {
+        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        let (mut used, mut fl) = (0usize, 0u8);
+        for (inp, nom) in inputs.iter().zip(&nominal) {
+            let f = inp.flags[p];
+            let v = f64::from(inp.velocity[p]);
+            if f & flags::NO_ESTIMATE != 0 || !v.is_finite() {
+                continue;
+            }
+            let a = match inp.projection {
+                Projection::Nominal { .. } => *nom,
+                Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
+            };
+            a11 += a[0] * a[0];
+            a12 += a[0] * a[1];
+            a22 += a[1] * a[1];
+            b1 += a[0] * v;
+            b2 += a[1] * v;
+            used += 1;
+            fl |= f & flags::ALIASING;
+        }
+        let det = a11 * a22 - a12 * a12;
+        let tr = a11 + a22;
+        if used < 2 || !(det > MIN_REL_DET * tr * tr) {
+            out.vx[p] = 0.0;
+            out.vz[p] = 0.0;
+            out.flags[p] = flags::NO_ESTIMATE;
+            continue;
+        }
+        out.vx[p] = ((a22 * b1 - a12 * b2) / det) as f32;
+        out.vz[p] = ((a11 * b2 - a12 * b1) / det) as f32;
+        out.flags[p] = fl;
+    }
+    Ok(())
+}
