@@ -213,6 +213,44 @@ impl TxWave {
     }
 }
 
+/// Second derivatives of the not-a-knot cubic spline through `y` at the integer knots 0..n−1
+/// (all zero, i.e. linear interpolation, when n < 4).
+fn spline_second_derivatives(y: &[f64]) -> Vec<f64> {
+    let n = y.len();
+    let mut m = vec![0.0; n];
+    if n < 4 {
+        return m;
+    }
+    let r = |i: usize| 6.0 * (y[i + 1] - 2.0 * y[i] + y[i - 1]);
+    // not-a-knot (M0 − 2M1 + M2 = 0, likewise at the end) turns rows 1 and n−2 into 6·M = r
+    m[1] = r(1) / 6.0;
+    m[n - 2] = r(n - 2) / 6.0;
+    if n > 4 {
+        // M_{i−1} + 4 M_i + M_{i+1} = r_i for i = 2..n−3 (Thomas algorithm)
+        let k = n - 4;
+        let (mut cp, mut dp) = (vec![0.0; k], vec![0.0; k]);
+        for j in 0..k {
+            let i = j + 2;
+            let mut rhs = r(i);
+            if i == 2 {
+                rhs -= m[1];
+            }
+            if i == n - 3 {
+                rhs -= m[n - 2];
+            }
+            let denom = if j == 0 { 4.0 } else { 4.0 - cp[j - 1] };
+            cp[j] = 1.0 / denom;
+            dp[j] = if j == 0 { rhs / denom } else { (rhs - dp[j - 1]) / denom };
+        }
+        for j in (0..k).rev() {
+            m[j + 2] = if j + 1 < k { dp[j] - cp[j] * m[j + 3] } else { dp[j] };
+        }
+    }
+    m[0] = 2.0 * m[1] - m[2];
+    m[n - 1] = 2.0 * m[n - 2] - m[n - 3];
+    m
+}
+
 /// Transmit distance and its gradient, per pixel.
 struct TxModel {
     kind: TxKind,
@@ -250,15 +288,22 @@ impl TxModel {
                     x.push(p.element_x(on[0]));
                     d.push(delays[on[0]] * p.c);
                 } else {
-                    // PyMUST: idxi = linspace(0, nTX−1, 4·nTX), interpolated positions and delays
+                    // PyMUST: idxi = linspace(0, nTX−1, 4·nTX); positions (linear in the index,
+                    // so the cubic interpolation is exact) and delays by a not-a-knot cubic
+                    // spline (scipy interp1d 'cubic'; linear below 4 elements).
+                    let yd: Vec<f64> = on.iter().map(|&e| delays[e]).collect();
+                    let m2 = spline_second_derivatives(&yd);
                     let m = 4 * n_tx;
                     for i in 0..m {
                         let t = (n_tx - 1) as f64 * i as f64 / (m - 1) as f64;
                         let k = (t.floor() as usize).min(n_tx - 2);
-                        let f = t - k as f64;
+                        let u = t - k as f64;
                         let (e0, e1) = (on[k], on[k + 1]);
-                        x.push(p.element_x(e0) * (1.0 - f) + p.element_x(e1) * f);
-                        d.push((delays[e0] * (1.0 - f) + delays[e1] * f) * p.c);
+                        x.push(p.element_x(e0) * (1.0 - u) + p.element_x(e1) * u);
+                        let v = (1.0 - u) * yd[k]
+                            + u * yd[k + 1]
+                            + (((1.0 - u).powi(3) - (1.0 - u)) * m2[k] + (u.powi(3) - u) * m2[k + 1]) / 6.0;
+                        d.push(v * p.c);
                     }
                 }
                 TxKind::Points { x, d }
