@@ -79,3 +79,37 @@ pub fn nrms_c(a: &[C32], b: &[Complex<f64>]) -> f64 {
     }
     (num / den).sqrt()
 }
+
+use sonoflow_beamform::{DasParams, Interpolation, Rf2Iq, Rf2IqParams, RfView};
+use sonoflow_simus::{Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
+
+/// Paper probe DAS parameters (5 MHz, 128 elements, pitch 0.3 mm, fs 20 MHz).
+pub fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
+    DasParams { fc: 5e6, c: 1540.0, fs, t0: 0.0, pitch: 0.30e-3, n_elements: 128, fnumber, rx_angle, interpolation: Interpolation::Linear }
+}
+
+/// SIMUS RF of `scat` for `tx` with the paper probe and a fixed plan (same length and gain for
+/// every frame), demodulated: returns element-major I/Q, n_samples, fs.
+pub struct RfSim {
+    pub simus: Simus,
+    pub probe: Probe,
+    pub plan: sonoflow_simus::FrequencyPlan,
+    pub rf2iq: Rf2Iq,
+}
+
+impl RfSim {
+    pub fn new(max_distance: f64, max_delay: f64) -> Self {
+        let probe = Probe::paper_5mhz();
+        let simus = Simus::new(probe.clone(), Medium::default(), SimusOptions::default()).unwrap();
+        let plan = simus.plan_for_max_distance(max_distance, max_delay).unwrap();
+        let rf2iq = Rf2Iq::new(Rf2IqParams::new(probe.fc, plan.fs, Some(probe.bandwidth))).unwrap();
+        Self { simus, probe, plan, rf2iq }
+    }
+
+    pub fn iq(&mut self, scat: &Scatterers, tx: &Transmit) -> Vec<C32> {
+        let n = self.plan.n_samples;
+        let mut rf = vec![0f32; self.probe.n_elements * n];
+        self.simus.simulate_into(scat, tx, &self.plan, &mut rf).unwrap();
+        self.rf2iq.process_to_vec(RfView::element_major(&rf, n, self.probe.n_elements)).unwrap()
+    }
+}
