@@ -82,6 +82,15 @@ static KINDS: &[KindSpec] = &[
         run: crate::node_simus::run,
     },
     KindSpec {
+        name: "regulariser",
+        about: "robust unsupervised smoothing of vector fields (Garcia's smoothn): raw → regularised, with the S used and the outlier fraction",
+        ports: &[port("raw", In, VectorFieldV1, true), port("regularised", Out, VectorFieldV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_regularise::validate,
+        run: crate::node_regularise::run,
+    },
+    KindSpec {
         name: "recorder",
         about: "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
         ports: &[],
@@ -116,6 +125,15 @@ static KINDS: &[KindSpec] = &[
         dynamic_outputs: false,
         validate: crate::node_test::validate_gain,
         run: crate::node_test::run_gain,
+    },
+    KindSpec {
+        name: "field-noise",
+        about: "adds Gaussian noise, gross outliers and missing pixels to vector fields (deterministic; exercises the regulariser)",
+        ports: &[port("clean", In, VectorFieldV1, true), port("noisy", Out, VectorFieldV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_test::validate_field_noise,
+        run: crate::node_test::run_field_noise,
     },
     KindSpec {
         name: "checker",

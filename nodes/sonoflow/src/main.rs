@@ -53,6 +53,8 @@ enum Cmd {
     Clean,
     /// SIMUS batch tool: scatterers + MUST parameters → RF (.npy) and a JSON sidecar.
     Simus(sonoflow::tool_simus::SimusArgs),
+    /// Smoothn batch tool: robust unsupervised smoothing of a (components, ny, nx) or (ny, nx) .npy field.
+    Smoothn(sonoflow::tool_smoothn::SmoothnArgs),
     /// Benchmarks (write a Markdown table).
     Bench {
         #[command(subcommand)]
@@ -141,6 +143,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             Ok(0)
         }
         Cmd::Simus(a) => sonoflow::tool_simus::run(&a),
+        Cmd::Smoothn(a) => sonoflow::tool_smoothn::run(&a),
         Cmd::Bench { what } => sonoflow::bench::run(what),
         Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }

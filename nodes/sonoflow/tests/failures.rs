@@ -162,6 +162,18 @@ fn out_of_range_parameters_stop_the_run_before_any_process_starts() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("flow.diameter"), "{err}");
     assert!(!dir.path().join("logs").exists(), "nothing was started");
+    for (set, needle) in [
+        ("regulariser.order=5", "1, 2 or 3"),
+        ("regulariser.s=0", "`s` = 0"),
+        ("regulariser.weights=\"quality\"", "weights"),
+        ("noise.outlier_fraction=1.5", "outlier_fraction"),
+    ] {
+        let out = run_graph("launch/regularise-demo.toml", dir.path(), &["--set", set]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{set}: {err}");
+        assert!(err.contains(needle), "{set}: {err}");
+        assert!(!dir.path().join("logs").exists(), "nothing was started");
+    }
 }
 
 /// Ctrl-C (SIGINT to the launcher): the graph stops in order, the recording is a complete,

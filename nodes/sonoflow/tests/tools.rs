@@ -1,0 +1,140 @@
+#![allow(clippy::unwrap_used)]
+//! The batch tools as a user runs them: real files in, real files out, compared with the
+//! libraries called directly.
+
+mod common;
+use common::bin;
+use sonoflow::npy;
+use std::process::Command;
+
+fn smoothn_cli(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(bin()).arg("smoothn").args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A smooth 2-component field on a 30 × 40 grid with noise, 10 % gross outliers and NaNs.
+fn noisy_field() -> (Vec<f64>, Vec<f64>) {
+    let (ny, nx) = (30, 40);
+    let mut clean = vec![0.0; 2 * ny * nx];
+    let mut noisy = clean.clone();
+    let mut state = 12345u64;
+    let mut uniform = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for c in 0..2 {
+        for y in 0..ny {
+            for x in 0..nx {
+                let i = c * ny * nx + y * nx + x;
+                let (fy, fx) = (y as f64 / ny as f64, x as f64 / nx as f64);
+                clean[i] = if c == 0 { (3.0 * fx).sin() * fy } else { (2.0 * fy).cos() + fx };
+                noisy[i] = clean[i] + 0.05 * (uniform() - 0.5) * 3.46;
+                if uniform() < 0.1 {
+                    noisy[i] = 4.0 * (uniform() - 0.5);
+                }
+                if uniform() < 0.03 {
+                    noisy[i] = f64::NAN;
+                }
+            }
+        }
+    }
+    (clean, noisy)
+}
+
+fn rms(a: &[f64], b: &[f64]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+#[test]
+fn smoothn_tool_matches_the_library_and_writes_a_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let (clean, noisy) = noisy_field();
+    let (inp, out) = (dir.path().join("field.npy"), dir.path().join("smooth.npy"));
+    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    let (code, stdout, stderr) =
+        smoothn_cli(&["--in", inp.to_str().unwrap(), "--robust", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("2 component(s)"), "{stdout}");
+    let got = npy::read(&out).unwrap();
+    assert_eq!(got.shape, vec![2, 30, 40]);
+    let params = sonoflow_smoothn::SmoothnParams { robust: true, ..Default::default() };
+    let (expect, report) = sonoflow_smoothn::smoothn(&noisy, &[30, 40], 2, None, &params).unwrap();
+    assert!(got.data == expect, "tool output differs from the library");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sonoflow::tool_smoothn::sidecar(&out)).unwrap()).unwrap();
+    assert_eq!(side["s"].as_f64().unwrap(), report.s);
+    assert_eq!(side["converged"].as_bool().unwrap(), report.converged);
+    assert_eq!(side["missing_values"].as_u64().unwrap() as usize, noisy.iter().filter(|v| v.is_nan()).count());
+    // Robust smoothing recovers the clean field far better than the data are (outliers of ±2).
+    let finite: Vec<usize> = (0..noisy.len()).filter(|&i| noisy[i].is_finite()).collect();
+    let e_data = rms(
+        &finite.iter().map(|&i| noisy[i]).collect::<Vec<_>>(),
+        &finite.iter().map(|&i| clean[i]).collect::<Vec<_>>(),
+    );
+    let e_out = rms(&got.data, &clean);
+    assert!(e_out < 0.1 * e_data, "data {e_data}, smoothed {e_out}");
+}
+
+#[test]
+fn smoothn_tool_fixed_s_scalar_field_with_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, noisy) = noisy_field();
+    let scalar: Vec<f64> = noisy[..1200].iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect();
+    let w: Vec<f64> = (0..1200).map(|i| if i % 11 == 0 { 0.0 } else { 1.0 + (i % 3) as f64 }).collect();
+    let (inp, wp, out) = (dir.path().join("f.npy"), dir.path().join("w.npy"), dir.path().join("o.npy"));
+    npy::write_f32(&inp, &[30, 40], false, &scalar.iter().map(|&v| v as f32).collect::<Vec<_>>()).unwrap();
+    npy::write_f64(&wp, &[30, 40], &w).unwrap();
+    let args = ["--in", inp.to_str().unwrap(), "--s", "3.5", "--order", "1", "--weights", wp.to_str().unwrap()];
+    let (code, _, stderr) = smoothn_cli(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{stderr}");
+    let got = npy::read(&out).unwrap();
+    assert_eq!(got.shape, vec![30, 40]);
+    let input: Vec<f64> = scalar.iter().map(|&v| v as f32 as f64).collect();
+    let params = sonoflow_smoothn::SmoothnParams { s: Some(3.5), order: 1, ..Default::default() };
+    let (expect, report) = sonoflow_smoothn::smoothn(&input, &[30, 40], 1, Some(&w), &params).unwrap();
+    assert!(got.data == expect);
+    assert_eq!(report.s, 3.5);
+}
+
+#[test]
+fn smoothn_tool_rejects_bad_input_with_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let inp = dir.path().join("nan.npy");
+    let out = dir.path().join("o.npy");
+    npy::write_f64(&inp, &[4, 5], &[f64::NAN; 20]).unwrap();
+    let (i, o) = (inp.to_str().unwrap(), out.to_str().unwrap());
+    let (code, _, err) = smoothn_cli(&["--in", i, "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("every value is NaN or infinite"), "{err}");
+    assert!(!out.exists(), "no output written on error");
+
+    let good = dir.path().join("good.npy");
+    npy::write_f64(&good, &[4, 5], &(0..20).map(|v| v as f64).collect::<Vec<_>>()).unwrap();
+    let g = good.to_str().unwrap();
+    let (code, _, err) = smoothn_cli(&["--in", g, "--order", "4", "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("order") && err.contains("1, 2 or 3"), "{err}");
+    let (code, _, err) = smoothn_cli(&["--in", g, "--s", "-1", "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("`s`") && err.contains("> 0"), "{err}");
+    let (code, _, err) = smoothn_cli(&["--in", g, "--weight-function", "huber", "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("bisquare, cauchy, talworth"), "{err}");
+    let w = dir.path().join("w.npy");
+    npy::write_f64(&w, &[5, 4], &[1.0; 20]).unwrap();
+    let (code, _, err) = smoothn_cli(&["--in", g, "--weights", w.to_str().unwrap(), "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("expected the grid shape [4, 5]"), "{err}");
+    npy::write_f64(&w, &[4, 5], &[-1.0; 20]).unwrap();
+    let (code, _, err) = smoothn_cli(&["--in", g, "--weights", w.to_str().unwrap(), "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("finite and ≥ 0"), "{err}");
+    let (code, _, err) = smoothn_cli(&["--in", dir.path().join("missing.npy").to_str().unwrap(), "--out", o]);
+    assert_eq!(code, 1);
+    assert!(err.contains("missing.npy"), "{err}");
+    assert!(!out.exists());
+}
