@@ -77,8 +77,9 @@ pub fn lfilter_zi(b: &[f64], a: &[f64]) -> Vec<f64> {
         for r in col + 1..n {
             let f = m[r][col] / d;
             if f != 0.0 {
-                for c in col..n {
-                    m[r][c] -= f * m[col][c];
+                let pivot_row = m[col].clone();
+                for (x, p) in m[r][col..].iter_mut().zip(&pivot_row[col..]) {
+                    *x -= f * p;
                 }
                 rhs[r] -= f * rhs[col];
             }
@@ -94,7 +95,13 @@ pub fn lfilter_zi(b: &[f64], a: &[f64]) -> Vec<f64> {
 
 /// In-place transposed direct form II filtering of complex data with real coefficients
 /// (`scipy.signal.lfilter(b, a, x, zi = zi·x0)`), `a[0] = 1`. `z` is the state (len = order).
-fn lfilter_in_place<I: Iterator<Item = usize>>(b: &[f64], a: &[f64], x: &mut [Complex<f64>], z: &mut [Complex<f64>], order: I) {
+fn lfilter_in_place<I: Iterator<Item = usize>>(
+    b: &[f64],
+    a: &[f64],
+    x: &mut [Complex<f64>],
+    z: &mut [Complex<f64>],
+    order: I,
+) {
     let n = z.len();
     for idx in order {
         let xn = x[idx];
@@ -151,7 +158,14 @@ mod tests {
             0.00486551187408724,
             0.000973102374817448,
         ];
-        let a_ref = [1.0, -3.1010653378832784, 4.086924478138159, -2.8013719587413277, 0.9901751548991403, -0.14352306041853485];
+        let a_ref = [
+            1.0,
+            -3.1010653378832784,
+            4.086924478138159,
+            -2.8013719587413277,
+            0.9901751548991403,
+            -0.14352306041853485,
+        ];
         for (x, y) in b.iter().zip(b_ref).chain(a.iter().zip(a_ref)) {
             assert!((x - y).abs() <= 1e-13 * y.abs().max(1.0), "{x} vs {y}");
         }

@@ -24,7 +24,7 @@ impl ClutterFilter {
     /// Filter removing polynomials of degree ≤ `order` from packets of `n_frames`.
     /// Errors: `order ≥ n_frames − 1` (nothing would be left) or `order > 16`.
     pub fn new(order: usize, n_frames: usize) -> Result<Self> {
-        if n_frames < 2 || n_frames > 1 << 16 {
+        if !(2..=1 << 16).contains(&n_frames) {
             return Err(invalid("clutter.n_frames", n_frames, "in [2, 65536]"));
         }
         if order > 16 || order + 1 >= n_frames {
@@ -94,7 +94,7 @@ impl ClutterFilter {
 
     /// Filters a MUST-layout packet `data[pixel·n_frames + n]`.
     pub fn apply_pixel_major(&self, data: &mut [C32]) -> Result<()> {
-        if data.len() % self.n_frames != 0 {
+        if !data.len().is_multiple_of(self.n_frames) {
             return Err(invalid("clutter packet length", data.len(), "a multiple of n_frames"));
         }
         let mut x = vec![Complex::new(0.0f64, 0.0); self.n_frames];

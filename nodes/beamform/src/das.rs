@@ -117,7 +117,11 @@ impl DasParams {
             return Err(invalid("das.rx_angle", self.rx_angle, "finite with |rx_angle| < 80° (1.396 rad)"));
         }
         if self.rx_angle != 0.0 && self.fnumber == 0.0 {
-            return Err(invalid("das.fnumber", self.fnumber, "> 0 when rx_angle != 0 (a steered sub-aperture needs a finite width)"));
+            return Err(invalid(
+                "das.fnumber",
+                self.fnumber,
+                "> 0 when rx_angle != 0 (a steered sub-aperture needs a finite width)",
+            ));
         }
         Ok(())
     }
@@ -183,7 +187,7 @@ impl TxWave {
             }
             TxWave::Delays { delays } => {
                 check_len("tx.delays", delays.len(), n_elements)?;
-                if let Some(d) = delays.iter().find(|d| !d.is_nan() && !(d.is_finite() && d.abs() < 1.0)) {
+                if let Some(d) = delays.iter().find(|d| !(d.is_nan() || d.is_finite() && d.abs() < 1.0)) {
                     return Err(invalid("tx.delays", d, "NaN (element off) or finite with |delay| < 1 s"));
                 }
                 let on: Vec<usize> = (0..n_elements).filter(|&e| !delays[e].is_nan()).collect();
@@ -191,7 +195,11 @@ impl TxWave {
                     (Some(a), Some(b)) if b - a + 1 == on.len() => {}
                     (None, _) => return Err(invalid("tx.delays", "all NaN", "at least one finite delay")),
                     _ => {
-                        return Err(invalid("tx.delays", "gaps", "a contiguous run of transmitting (non-NaN) elements"));
+                        return Err(invalid(
+                            "tx.delays",
+                            "gaps",
+                            "a contiguous run of transmitting (non-NaN) elements",
+                        ));
                     }
                 }
             }
@@ -620,7 +628,9 @@ impl CompoundPlan {
     pub fn new(plans: Vec<DasPlan>) -> Result<Self> {
         let first = plans.first().ok_or_else(|| invalid("compound.plans", 0, "at least one plan"))?;
         if let Some(p) = plans.iter().find(|p| p.grid != first.grid) {
-            return Err(BeamformError::ConfigMismatch { what: format!("compound plans on different grids: {:?} vs {:?}", p.grid, first.grid) });
+            return Err(BeamformError::ConfigMismatch {
+                what: format!("compound plans on different grids: {:?} vs {:?}", p.grid, first.grid),
+            });
         }
         Ok(Self { plans })
     }

@@ -143,7 +143,11 @@ impl DopplerParams {
         }
         for m in self.window {
             if !(1..=64).contains(&m) {
-                return Err(invalid("doppler.window", format!("{:?}", self.window), "two sizes in [1, 64] (rows, columns)"));
+                return Err(invalid(
+                    "doppler.window",
+                    format!("{:?}", self.window),
+                    "two sizes in [1, 64] (rows, columns)",
+                ));
             }
         }
         if !(self.alias_fraction > 0.0 && self.alias_fraction <= 1.0) {
@@ -246,9 +250,9 @@ fn window(shape: WindowShape, m: usize) -> Vec<f64> {
     match shape {
         WindowShape::Boxcar => vec![1.0; m],
         WindowShape::Hamming if m == 1 => vec![1.0],
-        WindowShape::Hamming => (0..m)
-            .map(|n| 0.54 - 0.46 * (2.0 * std::f64::consts::PI * n as f64 / (m - 1) as f64).cos())
-            .collect(),
+        WindowShape::Hamming => {
+            (0..m).map(|n| 0.54 - 0.46 * (2.0 * std::f64::consts::PI * n as f64 / (m - 1) as f64).cos()).collect()
+        }
     }
 }
 
@@ -302,7 +306,11 @@ impl DopplerEstimator {
     pub fn new(params: DopplerParams, nx: usize, nz: usize, dz: f64) -> Result<Self> {
         params.validate()?;
         if nx == 0 || nz == 0 || nx.saturating_mul(nz) > 1 << 26 {
-            return Err(BeamformError::BadDimension { field: "grid nx·nz", got: nx * nz, allowed: "in [1, 2^26] pixels with nx, nz >= 1" });
+            return Err(BeamformError::BadDimension {
+                field: "grid nx·nz",
+                got: nx * nz,
+                allowed: "in [1, 2^26] pixels with nx, nz >= 1",
+            });
         }
         positive("grid.dz", dz)?;
         let n = nx * nz;
@@ -356,7 +364,11 @@ impl DopplerEstimator {
         let nf = packet.n_frames();
         let lag = self.params.lag;
         if nf <= lag {
-            return Err(BeamformError::BadDimension { field: "packet frames", got: nf, allowed: "> lag (at least lag + 1 frames)" });
+            return Err(BeamformError::BadDimension {
+                field: "packet frames",
+                got: nf,
+                allowed: "> lag (at least lag + 1 frames)",
+            });
         }
         packet.check(n)?;
         let loupas = self.params.estimator == Estimator::Loupas;

@@ -68,7 +68,11 @@ impl Grid {
             return Err(invalid("grid.nx*grid.nz", self.nx * self.nz, "<= 67108864 pixels"));
         }
         if (self.x(self.nx - 1)).abs() > 10.0 || self.z(self.nz - 1) > 10.0 {
-            return Err(invalid("grid.dx/grid.dz", format!("{}/{}", self.dx, self.dz), "such that the grid stays within 10 m"));
+            return Err(invalid(
+                "grid.dx/grid.dz",
+                format!("{}/{}", self.dx, self.dz),
+                "such that the grid stays within 10 m",
+            ));
         }
         Ok(())
     }

@@ -120,7 +120,8 @@ pub fn solve_vector(inputs: &[VectorInput<'_>], out: &mut VectorField) -> Result
         }
         let det = a11 * a22 - a12 * a12;
         let tr = a11 + a22;
-        if used < 2 || !(det > MIN_REL_DET * tr * tr) {
+        let well_posed = det > MIN_REL_DET * tr * tr;
+        if used < 2 || !well_posed {
             out.vx[p] = 0.0;
             out.vz[p] = 0.0;
             out.flags[p] = flags::NO_ESTIMATE;

@@ -92,7 +92,8 @@ fn doppler_sign_toward_probe_from_delays() {
 fn vector_solve_matches_eq20_and_steered_geometry() {
     let phi = 15f64.to_radians();
     let v = [0.3, -0.2];
-    for (tilt, angles) in [(0.0, vec![-phi, phi]), (10f64.to_radians(), vec![-phi, 0.0, phi]), (-0.2, vec![-0.3, 0.25])] {
+    for (tilt, angles) in [(0.0, vec![-phi, phi]), (10f64.to_radians(), vec![-phi, 0.0, phi]), (-0.2, vec![-0.3, 0.25])]
+    {
         let vd: Vec<Vec<f32>> = angles
             .iter()
             .map(|r| {
@@ -104,7 +105,11 @@ fn vector_solve_matches_eq20_and_steered_geometry() {
         let inputs: Vec<VectorInput> = vd
             .iter()
             .zip(&angles)
-            .map(|(d, r)| VectorInput { velocity: d, flags: &fl, projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *r } })
+            .map(|(d, r)| VectorInput {
+                velocity: d,
+                flags: &fl,
+                projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *r },
+            })
             .collect();
         let mut f = VectorField::default();
         solve_vector(&inputs, &mut f).unwrap();
@@ -171,13 +176,20 @@ fn clutter_filter_removes_polynomials_keeps_flow() {
 #[test]
 fn results_do_not_depend_on_thread_count() {
     let ns = 600;
-    let iq: Vec<C32> = (0..128 * ns).map(|i| C32::new(((i * 7919) % 1013) as f32 / 1013.0 - 0.5, ((i * 104_729) % 997) as f32 / 997.0 - 0.5)).collect();
+    let iq: Vec<C32> = (0..128 * ns)
+        .map(|i| C32::new(((i * 7919) % 1013) as f32 / 1013.0 - 0.5, ((i * 104_729) % 997) as f32 / 997.0 - 0.5))
+        .collect();
     let grid = Grid::spanning(-5e-3, 5e-3, 50, 5e-3, 20e-3, 40).unwrap();
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| {
             let plan = DasPlan::new(&paper_das(3.0, 0.2, 20e6), &TxWave::PlaneWave { tilt: 0.1 }, &grid, ns).unwrap();
-            let imgs: Vec<Vec<C32>> = (0..6).map(|k| plan.apply_to_vec(&iq.iter().cycle().skip(k * 10).take(iq.len()).copied().collect::<Vec<_>>()).unwrap()).collect();
+            let imgs: Vec<Vec<C32>> = (0..6)
+                .map(|k| {
+                    plan.apply_to_vec(&iq.iter().cycle().skip(k * 10).take(iq.len()).copied().collect::<Vec<_>>())
+                        .unwrap()
+                })
+                .collect();
             let refs: Vec<&[C32]> = imgs.iter().map(|v| v.as_slice()).collect();
             let mut p = DopplerParams::new(5e6, 1540.0, 5e3);
             p.window = [3, 5];
@@ -252,7 +264,8 @@ fn bad_input_gives_named_errors() {
     let two: [&[C32]; 2] = [&f, &short];
     assert_eq!(field_of(est.estimate_to_map(Packet::Frames(&two)).unwrap_err()), "packet frame");
     // serde: unknown fields are rejected, MUST aliases accepted
-    let p: DasParams = serde_json::from_str(r#"{"fc":5e6,"fs":2e7,"pitch":3e-4,"Nelements":128,"fnumber":3,"RXangle":0.26}"#).unwrap();
+    let p: DasParams =
+        serde_json::from_str(r#"{"fc":5e6,"fs":2e7,"pitch":3e-4,"Nelements":128,"fnumber":3,"RXangle":0.26}"#).unwrap();
     assert_eq!((p.n_elements, p.rx_angle, p.c), (128, 0.26, 1540.0));
     assert!(serde_json::from_str::<DasParams>(r#"{"fc":5e6,"fs":2e7,"pitch":3e-4,"Nelements":128,"fnum":3}"#).is_err());
     let d: DopplerParams = serde_json::from_str(r#"{"fc":5e6,"PRF":1e4,"window":[3,3],"estimator":"loupas"}"#).unwrap();

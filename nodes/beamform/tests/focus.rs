@@ -43,9 +43,21 @@ fn point_scatterer_focuses_at_true_position() {
     let probe = sim.probe.clone();
     let cases: Vec<(&str, Transmit, TxWave)> = vec![
         ("pw 0°", Transmit::plane_wave(&probe, 1540.0, 0.0).unwrap(), TxWave::PlaneWave { tilt: 0.0 }),
-        ("pw +10°", Transmit::plane_wave(&probe, 1540.0, 10f64.to_radians()).unwrap(), TxWave::PlaneWave { tilt: 10f64.to_radians() }),
-        ("focused (0, 25 mm)", Transmit::focused(&probe, 1540.0, 0.0, 25e-3).unwrap(), TxWave::Focused { x0: 0.0, z0: 25e-3 }),
-        ("diverging (0, -10 mm)", Transmit::diverging(&probe, 1540.0, 0.0, -10e-3).unwrap(), TxWave::Diverging { x0: 0.0, z0: -10e-3 }),
+        (
+            "pw +10°",
+            Transmit::plane_wave(&probe, 1540.0, 10f64.to_radians()).unwrap(),
+            TxWave::PlaneWave { tilt: 10f64.to_radians() },
+        ),
+        (
+            "focused (0, 25 mm)",
+            Transmit::focused(&probe, 1540.0, 0.0, 25e-3).unwrap(),
+            TxWave::Focused { x0: 0.0, z0: 25e-3 },
+        ),
+        (
+            "diverging (0, -10 mm)",
+            Transmit::diverging(&probe, 1540.0, 0.0, -10e-3).unwrap(),
+            TxWave::Diverging { x0: 0.0, z0: -10e-3 },
+        ),
     ];
     for (name, tx, wave) in &cases {
         let iq = sim.iq(&scat, tx);

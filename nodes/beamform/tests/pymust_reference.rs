@@ -154,8 +154,8 @@ fn iq2doppler_matches_pymust() {
         let var = read_npy(&format!("dop_{name}_var.npy")).re;
         let vn = p.nyquist_velocity();
         let ev = map.velocity.iter().zip(&v).map(|(a, b)| (f64::from(*a) - b).abs()).fold(0.0, f64::max) / vn;
-        let evar = map.variance.iter().zip(&var).map(|(a, b)| (f64::from(*a) - b).abs()).fold(0.0, f64::max)
-            / (vn * vn);
+        let evar =
+            map.variance.iter().zip(&var).map(|(a, b)| (f64::from(*a) - b).abs()).fold(0.0, f64::max) / (vn * vn);
         println!("iq2doppler {name}: max |dv|/VN {ev:.2e}, max |dvar|/VN² {evar:.2e}");
         assert!(ev < 1e-6, "{name}: {ev}");
         assert!(evar < 1e-6, "{name}: {evar}");

@@ -77,7 +77,11 @@ fn run(tilt_deg: f64, v: [f64; 2]) -> Result1 {
     };
     let inputs: Vec<VectorInput> = maps
         .iter()
-        .map(|(m, rx)| VectorInput { velocity: &m.velocity, flags: &m.flags, projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *rx } })
+        .map(|(m, rx)| VectorInput {
+            velocity: &m.velocity,
+            flags: &m.flags,
+            projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *rx },
+        })
         .collect();
     let mut f = VectorField::default();
     solve_vector(&inputs, &mut f).unwrap();

@@ -85,7 +85,17 @@ use sonoflow_simus::{Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
 /// Paper probe DAS parameters (5 MHz, 128 elements, pitch 0.3 mm, fs 20 MHz).
 pub fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
-    DasParams { fc: 5e6, c: 1540.0, fs, t0: 0.0, pitch: 0.30e-3, n_elements: 128, fnumber, rx_angle, interpolation: Interpolation::Linear }
+    DasParams {
+        fc: 5e6,
+        c: 1540.0,
+        fs,
+        t0: 0.0,
+        pitch: 0.30e-3,
+        n_elements: 128,
+        fnumber,
+        rx_angle,
+        interpolation: Interpolation::Linear,
+    }
 }
 
 /// SIMUS RF of `scat` for `tx` with the paper probe and a fixed plan (same length and gain for
