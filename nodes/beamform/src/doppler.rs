@@ -377,6 +377,25 @@ impl DopplerEstimator {
         }
         let pk = &packet;
         self.r0.par_chunks_mut(nx).zip(self.r1.par_chunks_mut(nx)).enumerate().for_each(|(iz, (r0, r1))| {
+            if let Packet::Frames(fr) = pk {
+                // stream each frame's row (same per-pixel summation order as below)
+                let row = iz * nx..(iz + 1) * nx;
+                r0.fill(0.0);
+                r1.fill(C64::default());
+                for f in fr.iter() {
+                    for (p, x) in r0.iter_mut().zip(&f[row.clone()]) {
+                        *p += C64::new(f64::from(x.re), f64::from(x.im)).norm_sqr();
+                    }
+                }
+                for k in 0..nf - lag {
+                    for ((c, a), b) in r1.iter_mut().zip(&fr[k][row.clone()]).zip(&fr[k + lag][row.clone()]) {
+                        let a = C64::new(f64::from(a.re), f64::from(a.im));
+                        let b = C64::new(f64::from(b.re), f64::from(b.im));
+                        *c += a * b.conj();
+                    }
+                }
+                return;
+            }
             for ix in 0..nx {
                 let pix = iz * nx + ix;
                 let (mut p, mut c) = (0.0f64, C64::default());
