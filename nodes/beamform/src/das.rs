@@ -6,9 +6,8 @@
 //! * round-trip delay `τ = (d_TX(p) + |p − e|)/c`, fractional sample `i = (τ − t0)·fs`;
 //! * receive aperture (`fnumber` F > 0, receive angle θ): element e is used iff
 //!   `|x − x_e − z·tan θ| ≤ z/(2F·cos θ)` — the aperture is centred where the line through p at
-//!   angle θ from the z axis meets the array (θ > 0 centres it at smaller x, i.e. the receive axis
-//!   points from the pixel up towards −x … the beam "looks" towards +x), and its width keeps the
-//!   f-number F along that line. F = 0 (MUST's default) uses every element (θ must then be 0).
+//!   angle θ from the z axis meets the array (θ > 0 centres it at smaller x: the receive beam runs
+//!   from the aperture down towards +x), and its width keeps the f-number F along that line. F = 0 (MUST's default) uses every element (θ must then be 0).
 //!   Rectangular weights, plain sum (MUST: no normalisation by the number of elements);
 //! * linear interpolation on samples `⌊i⌋, ⌊i⌋+1` (valid for `0 ≤ i ≤ n_samples − 2`), or nearest;
 //! * I/Q phase rotation: each weight is multiplied by `exp(i·2π fc·τ)` (the demodulated signal is
