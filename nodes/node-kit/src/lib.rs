@@ -392,6 +392,10 @@ pub type InSample<M> = Sample<Svc, [<M as WireMessage>::Elem], <M as WireMessage
 /// Callback receiving raw (header, payload) bytes.
 pub type BytesFn<'a> = dyn FnMut(&[u8], &[u8]) -> Result<(), KitError> + 'a;
 
+/// How long an input of a multi-publisher topic waits for all its publishers to appear before it
+/// connects to those present (see `Input::handshake_step`).
+pub const MULTI_PUBLISHER_GRACE: Duration = Duration::from_secs(10);
+
 /// A typed input port.
 pub struct Input<M: WireMessage> {
     services: TopicServices<M>,
@@ -399,6 +403,8 @@ pub struct Input<M: WireMessage> {
     listener: std::rc::Rc<Listener<Svc>>,
     ready: Notifier<Svc>,
     connected: bool,
+    /// When the first publisher of a multi-publisher topic was seen (handshake grace period).
+    first_publisher_seen: Option<Instant>,
     /// Last sequence number per publisher (`source_id`): topics may have several publishers.
     last_seq: Vec<(u32, u64)>,
     /// Messages received (end-of-stream markers excluded).
@@ -429,6 +435,7 @@ impl<M: WireMessage> Input<M> {
             listener,
             ready,
             connected: false,
+            first_publisher_seen: None,
             last_seq: Vec::new(),
             received: 0,
             gaps: 0,
@@ -445,8 +452,21 @@ impl<M: WireMessage> Input<M> {
         if self.connected {
             return Ok(true);
         }
-        if self.services.pubsub.dynamic_config().number_of_publishers() == 0 {
+        let publishers = self.services.pubsub.dynamic_config().number_of_publishers();
+        if publishers == 0 {
             return Ok(false);
+        }
+        // A topic with several publishers (`_stats`: one per node) is joined once all of them
+        // exist: a ready notification only reaches publishers whose ready listener already
+        // exists, so notifying at the first one would leave a late starter waiting for ever.
+        // After MULTI_PUBLISHER_GRACE the input connects to those present (a publisher that
+        // never appears, e.g. an external program without stats, must not block the graph).
+        let expected = self.services.qos.max_publishers.max(1);
+        if publishers < expected {
+            let first = *self.first_publisher_seen.get_or_insert_with(Instant::now);
+            if first.elapsed() < MULTI_PUBLISHER_GRACE {
+                return Ok(false);
+            }
         }
         let ctx = format!("handshake on `{}`", self.topic());
         self.subscriber.update_connections().map_err(ipc(ctx.clone()))?;

@@ -5,6 +5,7 @@
 pub mod bench;
 pub mod kinds;
 pub mod launch;
+pub mod node_beamform;
 pub mod node_flow;
 pub mod node_recorder;
 pub mod node_regularise;

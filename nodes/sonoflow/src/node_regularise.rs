@@ -4,8 +4,9 @@
 //!
 //! * The velocity planes (`vx`, `vz`) are smoothed jointly (one S, shared robust weights), on the
 //!   message's grid with its spacing (`dz`, `dx`) — the field is `(nz, nx)` row-major.
-//! * Weights: a `weight` plane (quality in [0, 1]) or a `power` plane from the estimator is used
-//!   as smoothn weights (`weights = "auto"` takes whichever is present, `weight` first). A `flags`
+//! * Weights: a `weight` plane (quality in [0, 1]) from the estimator is used as smoothn weights
+//!   (`weights = "auto"`, the default, when present); `weights = "power"` uses the slow-time power
+//!   plane instead (smoothn normalises weights by their maximum). A `flags`
 //!   plane's "no estimate" bit and non-finite velocities make a pixel missing (weight 0): the
 //!   smoother fills it.
 //! * With `mask = true` (default) and a `mask` plane present, pixels outside the mask are missing
@@ -28,7 +29,7 @@ use sonoflow_smoothn::{Flavour, Smoothn, SmoothnParams, WeightFunction};
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum WeightSource {
-    /// The `weight` plane if present, else the `power` plane, else uniform.
+    /// The `weight` plane (quality in [0, 1]) if present, else uniform.
     Auto,
     /// Uniform weights (missing values still get weight 0).
     None,
@@ -151,7 +152,7 @@ impl Regulariser {
         let plane_of = |i: usize| &planes[i * n..(i + 1) * n];
         let wsrc = match self.params.weights {
             WeightSource::None => None,
-            WeightSource::Auto => find_plane(ids, plane::WEIGHT).or_else(|| find_plane(ids, plane::POWER)),
+            WeightSource::Auto => find_plane(ids, plane::WEIGHT),
             WeightSource::Weight => Some(find_plane(ids, plane::WEIGHT).ok_or_else(|| {
                 anyhow::anyhow!("weights = \"weight\" but frame {} has no `weight` plane", h.common.frame_id)
             })?),

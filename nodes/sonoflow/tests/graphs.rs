@@ -343,3 +343,80 @@ fn regulariser_node_equals_the_library_and_removes_outliers() {
         );
     }
 }
+
+/// RMS error (m/s) of (vx, vz) against the truth over the pixels whose truth mask is set and that
+/// lie at least `margin` pixels inside it (the Doppler of a wall pixel mixes both sides).
+/// Also returns the mean estimated and true (vx, vz) over those pixels.
+fn vessel_error(truth: &[f32], est: &[f32], nx: usize, nz: usize, margin: usize) -> (f64, f64, usize, [f64; 4]) {
+    let n = nx * nz;
+    let inside = |ix: usize, iz: usize| truth[2 * n + iz * nx + ix] > 0.5;
+    let (mut e2, mut ref2, mut cnt) = (0.0, 0.0, 0);
+    let mut means = [0.0; 4];
+    for iz in margin..nz - margin {
+        for ix in margin..nx - margin {
+            let all = (iz - margin..=iz + margin).all(|z| (ix - margin..=ix + margin).all(|x| inside(x, z)));
+            if !all {
+                continue;
+            }
+            let i = iz * nx + ix;
+            e2 += ((est[i] - truth[i]) as f64).powi(2) + ((est[n + i] - truth[n + i]) as f64).powi(2);
+            ref2 += (truth[i] as f64).powi(2) + (truth[n + i] as f64).powi(2);
+            for (m, v) in means.iter_mut().zip([est[i], est[n + i], truth[i], truth[n + i]]) {
+                *m += v as f64;
+            }
+            cnt += 1;
+        }
+    }
+    means.iter_mut().for_each(|m| *m /= cnt as f64);
+    ((e2 / cnt as f64).sqrt(), (ref2 / cnt as f64).sqrt(), cnt, means)
+}
+
+/// The quickstart chain (flow → SIMUS → beamformer ±15° → Doppler → regulariser) measures the
+/// vessel's velocity field; the estimator is swappable by `--set`.
+#[test]
+fn quickstart_chain_measures_the_vessel_velocity() {
+    use sonoflow_messages::kinds::DopplerMap;
+    for estimator in ["autocorrelation", "loupas"] {
+        let dir = tempfile::tempdir().unwrap();
+        let set = format!("doppler.estimator=\"{estimator}\"");
+        let out =
+            run_graph("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=1", "--set", &set]);
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let rec = dir.path().join("recording.mcap");
+        let (truth, raw, reg, maps) = (
+            read_topic(&rec, "truth"),
+            read_topic(&rec, "vector"),
+            read_topic(&rec, "regularised"),
+            read_topic(&rec, "maps"),
+        );
+        assert_eq!((truth.len(), raw.len(), reg.len(), maps.len()), (1, 1, 1, 2));
+        assert_eq!(read_topic(&rec, "iq").len(), 64, "32 frames × 2 receive angles");
+        let (th, tv) = cdr::decode::<VectorField>(&truth[0]).unwrap();
+        let (_, rv) = cdr::decode::<VectorField>(&raw[0]).unwrap();
+        let (gh, gv) = cdr::decode::<VectorField>(&reg[0]).unwrap();
+        for m in &maps {
+            let (mh, _) = cdr::decode::<DopplerMap>(m).unwrap();
+            assert_eq!(mh.estimator, if estimator == "loupas" { 1 } else { 0 });
+            assert!((mh.nyquist_velocity - 1540.0 * 1e4 / 4.0 / 5e6).abs() < 1e-9);
+        }
+        let (nx, nz) = (th.grid.nx as usize, th.grid.nz as usize);
+        let (e_raw, v_rms, cnt, m) = vessel_error(&tv, &rv, nx, nz, 2);
+        let (e_reg, _, _, _) = vessel_error(&tv, &gv, nx, nz, 2);
+        println!(
+            "{estimator}: {cnt} px, |v| rms {v_rms:.3}, raw error {e_raw:.4}, regularised {e_reg:.4}, S {:.3e}, mean (vx, vz) {:.4} {:.4} truth {:.4} {:.4}",
+            gh.smoothing_s, m[0], m[1], m[2], m[3]
+        );
+        // Measured (one packet of 32 frames, no spatial window, 1547 pixels ≥ 2 px inside the
+        // lumen): raw RMS error 0.116 m/s for |v| 0.41 m/s, regularised 0.094–0.097; mean vz
+        // within 3 % of the truth, mean vx 17–19 % low (the lateral component is the difference
+        // of the two sub-aperture Doppler values divided by sin 15°, so a 1 cm/s bias between
+        // them is 4 cm/s in vx; see the closing note of issue 4). The bounds below leave room for
+        // speckle (about 50 independent resolution cells: ±4 % on the means) without accepting
+        // a sign error or a wrong projection (either would give ≥ 100 % errors).
+        assert!(cnt > 1000);
+        assert!(e_raw < 0.35 * v_rms, "{estimator}: raw error {e_raw} vs |v| {v_rms}");
+        assert!(e_reg < e_raw, "{estimator}: regularised {e_reg} vs raw {e_raw}");
+        assert!((m[1] / m[3] - 1.0).abs() < 0.08, "{estimator}: mean vz {} vs truth {}", m[1], m[3]);
+        assert!((m[0] / m[2] - 1.0).abs() < 0.25, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
+    }
+}

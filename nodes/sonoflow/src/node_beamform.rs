@@ -1,0 +1,572 @@
+//! `beamformer` and `doppler` / `doppler-loupas` nodes: thin wrappers of `sonoflow-beamform`.
+//!
+//! * `beamformer`: each RF frame → RF→I/Q (MUST `rf2iq`) → delay-and-sum onto `grid` for the
+//!   frame's plane-wave tilt, once per receive angle in `rx_angles_deg` (receive sub-apertures,
+//!   f-number `fnumber`) → one I/Q image per receive angle. DAS plans are built on the first
+//!   frame of each (tilt, RF length, fs, t0, probe) and reused.
+//! * `doppler` (lag-L autocorrelation, eq. 19) and `doppler-loupas` (Loupas 2-D autocorrelator):
+//!   collect the I/Q images of a packet per (transmit tilt, receive angle); at the end of the
+//!   packet (a frame of the next packet, or end of stream) optionally clutter-filter them,
+//!   estimate one Doppler map per angle pair and solve the vector velocity by least squares over
+//!   all angle pairs (nominal plane-wave projections). Outputs: `vector` (vx, vz, flags, power)
+//!   and, if connected, `maps` (velocity, power, normalised variance, flags per angle pair).
+//!   The two kinds differ only in their default estimator, so a launch file swaps them by kind.
+
+use crate::kinds::parse;
+use crate::nodeutil::{for_each, Flow};
+use serde::{Deserialize, Serialize};
+use sonoflow_beamform::{
+    ClutterFilter, DasParams, DasPlan, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Grid, Interpolation,
+    Packet, Projection, Rf2Iq, Rf2IqParams, RfView, TxWave, VectorField as BfVectorField, VectorInput, WindowShape,
+    C32,
+};
+use sonoflow_messages::kinds::{DopplerMap as DopplerMapMsg, IqFrame, RfFrame, VectorField};
+use sonoflow_messages::{
+    plane, Complex32, DopplerMapHeaderV1, GridV1, IqFrameHeaderV1, MsgHeaderV1, VectorFieldHeaderV1, SAMPLE_RF_F32,
+    VECTOR_RAW,
+};
+use sonoflow_node_kit::{process_cpu_ns, Kit};
+use std::collections::BTreeMap;
+
+/// Imaging grid (m): node (ix, iz) at (x0 + ix·dx, z0 + iz·dz).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GridParams {
+    pub x0: f64,
+    pub z0: f64,
+    pub dx: f64,
+    pub dz: f64,
+    pub nx: usize,
+    pub nz: usize,
+}
+
+impl GridParams {
+    fn to_grid(&self) -> Grid {
+        Grid { x0: self.x0, z0: self.z0, dx: self.dx, dz: self.dz, nx: self.nx, nz: self.nz }
+    }
+}
+
+/// `beamformer` parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BeamformerParams {
+    /// Imaging grid; default 20 × 20 mm from 10 mm depth, 0.25 mm spacing (81 × 81).
+    pub grid: GridParams,
+    /// Receive f-number (> 0 with steered receive; 0 = full aperture). Paper: 1.5 is typical.
+    pub fnumber: f64,
+    /// Receive steering angles (degrees), one I/Q image each. Paper: −15 and +15.
+    pub rx_angles_deg: Vec<f64>,
+    /// RF → I/Q low-pass: bandwidth in % of fc (absent: MUST's default cut-off min(2 fc/fs, 0.5)).
+    pub bandwidth: Option<f64>,
+    /// Interpolation of the I/Q traces: `linear` (default) or `nearest`.
+    pub interpolation: Interpolation,
+}
+
+impl Default for BeamformerParams {
+    fn default() -> Self {
+        Self {
+            grid: GridParams { x0: -0.01, z0: 0.01, dx: 0.25e-3, dz: 0.25e-3, nx: 81, nz: 81 },
+            fnumber: 1.5,
+            rx_angles_deg: vec![-15.0, 15.0],
+            bandwidth: None,
+            interpolation: Interpolation::Linear,
+        }
+    }
+}
+
+impl BeamformerParams {
+    fn check(&self) -> Result<(), String> {
+        self.grid.to_grid().validate().map_err(|e| format!("grid: {e}"))?;
+        if self.grid.nx * self.grid.nz > 4_000_000 {
+            return Err(format!("grid: {} × {} pixels is out of range: at most 4 000 000", self.grid.nz, self.grid.nx));
+        }
+        if !(self.fnumber.is_finite() && (0.0..=1000.0).contains(&self.fnumber)) {
+            return Err(format!("fnumber = {} is out of range: 0 ..= 1000 (0 = full aperture)", self.fnumber));
+        }
+        if self.rx_angles_deg.is_empty() || self.rx_angles_deg.len() > 16 {
+            return Err(format!("rx_angles_deg has {} entries: 1 ..= 16 allowed", self.rx_angles_deg.len()));
+        }
+        for (i, a) in self.rx_angles_deg.iter().enumerate() {
+            if !(a.is_finite() && a.abs() < 80.0) {
+                return Err(format!("rx_angles_deg[{i}] = {a} is out of range: (-80, 80) degrees"));
+            }
+            if *a != 0.0 && self.fnumber == 0.0 {
+                return Err(format!("rx_angles_deg[{i}] = {a} needs fnumber > 0 (a steered sub-aperture)"));
+            }
+        }
+        if let Some(b) = self.bandwidth {
+            if !(b > 0.0 && b < 200.0) {
+                return Err(format!("bandwidth = {b} is out of range: (0, 200) % of fc"));
+            }
+        }
+        Ok(())
+    }
+}
+
+pub fn validate_beamformer(v: &serde_json::Value) -> Result<(), String> {
+    parse::<BeamformerParams>(v)?.check()
+}
+
+/// Bit-exact key of everything a DAS plan depends on besides the node parameters.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct PlanKey {
+    bits: [u64; 6],
+    n_elements: u32,
+    n_samples: u32,
+}
+
+fn plan_key(h: &sonoflow_messages::RfFrameHeaderV1) -> PlanKey {
+    PlanKey {
+        bits: [h.fs.to_bits(), h.t0.to_bits(), h.fc.to_bits(), h.c.to_bits(), h.pitch.to_bits(), h.tx_angle.to_bits()],
+        n_elements: h.n_channels,
+        n_samples: h.n_samples,
+    }
+}
+
+/// What the beamformer node does per RF frame, without IPC (used by the node and the tests).
+pub struct Beamformer {
+    params: BeamformerParams,
+    rf2iq: Option<(u64, u64, u64, Rf2Iq)>,
+    plans: BTreeMap<PlanKey, Vec<DasPlan>>,
+    iq: Vec<C32>,
+}
+
+impl Beamformer {
+    pub fn new(params: BeamformerParams) -> Result<Self, String> {
+        params.check()?;
+        Ok(Self { params, rf2iq: None, plans: BTreeMap::new(), iq: Vec::new() })
+    }
+
+    /// Receive angles (rad).
+    pub fn rx_angles(&self) -> Vec<f64> {
+        self.params.rx_angles_deg.iter().map(|a| a.to_radians()).collect()
+    }
+
+    /// Demodulates one RF frame (element-major f32) and prepares the DAS plans for it. Call
+    /// [`Beamformer::image`] for each receive angle afterwards.
+    pub fn demodulate(&mut self, h: &sonoflow_messages::RfFrameHeaderV1, rf: &[f32]) -> anyhow::Result<()> {
+        if h.sample_format != SAMPLE_RF_F32 {
+            anyhow::bail!("RF frame {}: sample_format {} is not real f32 RF", h.common.frame_id, h.sample_format);
+        }
+        let (ns, ne) = (h.n_samples as usize, h.n_channels as usize);
+        let key = (h.fc.to_bits(), h.fs.to_bits(), h.t0.to_bits());
+        if self.rf2iq.as_ref().is_none_or(|r| (r.0, r.1, r.2) != key) {
+            let mut p = Rf2IqParams::new(h.fc, h.fs, self.params.bandwidth);
+            p.t0 = h.t0;
+            self.rf2iq = Some((key.0, key.1, key.2, Rf2Iq::new(p)?));
+        }
+        let Some((_, _, _, r2i)) = self.rf2iq.as_mut() else { anyhow::bail!("no demodulator") };
+        self.iq.resize(ns * ne, C32::new(0.0, 0.0));
+        r2i.process(RfView::element_major(rf, ns, ne), &mut self.iq)?;
+        let pk = plan_key(h);
+        if !self.plans.contains_key(&pk) {
+            if self.plans.len() >= 64 {
+                self.plans.clear();
+            }
+            let grid = self.params.grid.to_grid();
+            let tx = TxWave::PlaneWave { tilt: h.tx_angle };
+            let mut v = Vec::new();
+            for rx in self.rx_angles() {
+                let dp = DasParams {
+                    fc: h.fc,
+                    c: h.c,
+                    fs: h.fs,
+                    t0: h.t0,
+                    pitch: h.pitch,
+                    n_elements: ne,
+                    fnumber: self.params.fnumber,
+                    rx_angle: rx,
+                    interpolation: self.params.interpolation,
+                };
+                v.push(DasPlan::new(&dp, &tx, &grid, ns)?);
+            }
+            self.plans.insert(pk, v);
+        }
+        Ok(())
+    }
+
+    /// Beamforms the last demodulated frame for receive angle number `j` into `out` (nz·nx).
+    pub fn image(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize, out: &mut [C32]) -> anyhow::Result<()> {
+        let plans = self.plans.get(&plan_key(h)).ok_or_else(|| anyhow::anyhow!("no DAS plan for this frame"))?;
+        let plan = plans.get(j).ok_or_else(|| anyhow::anyhow!("receive angle {j} out of range"))?;
+        plan.apply(&self.iq, out)?;
+        Ok(())
+    }
+
+    /// The I/Q header of receive angle `j` for RF frame `h`.
+    pub fn iq_header(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize) -> IqFrameHeaderV1 {
+        let g = &self.params.grid;
+        let n_rx = self.params.rx_angles_deg.len() as u64;
+        let mut ih = IqFrameHeaderV1 {
+            grid: GridV1 { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as u32, nz: g.nz as u32 },
+            fc: h.fc,
+            c: h.c,
+            prf: h.prf,
+            rx_angle: self.params.rx_angles_deg[j].to_radians(),
+            tx_angle: h.tx_angle,
+            packet: h.packet,
+            frame_in_packet: h.frame_in_packet,
+            tx_id: h.tx_id,
+            ..Default::default()
+        };
+        ih.common = MsgHeaderV1 {
+            frame_id: h.common.frame_id * n_rx + j as u64,
+            t_valid: h.common.t_valid,
+            ..Default::default()
+        };
+        ih
+    }
+}
+
+pub fn run_beamformer(mut kit: Kit) -> anyhow::Result<()> {
+    let p: BeamformerParams = parse(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut bf = Beamformer::new(p).map_err(anyhow::Error::msg)?;
+    let mut input = kit.input::<RfFrame>("rf")?;
+    let mut out = kit.output::<IqFrame>("iq")?;
+    kit.handshake(&mut [&mut input, &mut out])?;
+    let n_rx = bf.params.rx_angles_deg.len();
+    let mut img = vec![C32::new(0.0, 0.0); bf.params.grid.nx * bf.params.grid.nz];
+    let mut last_t = 0.0;
+    for_each(&mut kit, &mut input, |kit, sample| {
+        let t0 = process_cpu_ns();
+        let h = *sample.user_header();
+        bf.demodulate(&h, sample.payload())?;
+        let demod_ns = process_cpu_ns() - t0;
+        kit.stats.messages_in += 1;
+        for j in 0..n_rx {
+            let t1 = process_cpu_ns();
+            bf.image(&h, j, &mut img)?;
+            let mut ih = bf.iq_header(&h, j);
+            let compute = process_cpu_ns() - t1 + if j == 0 { demod_ns } else { 0 };
+            ih.common.compute_ns = compute;
+            out.publish_in_place(img.len(), ih, |dst| {
+                for (d, s) in dst.iter_mut().zip(&img) {
+                    d.write(Complex32 { re: s.re, im: s.im });
+                }
+            })?;
+            kit.stats.messages_out += 1;
+            kit.stats.bytes_out += (img.len() * 8) as u64;
+            kit.record(ih.common.frame_id, ih.common.t_valid, compute)?;
+        }
+        last_t = h.common.t_valid;
+        Ok(Flow::Continue)
+    })?;
+    out.publish_eos(last_t)?;
+    kit.stats.gaps = input.gaps;
+    kit.finish()?;
+    Ok(())
+}
+
+/// `doppler` / `doppler-loupas` parameters (fc, c and PRF come from the I/Q headers).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DopplerNodeParams {
+    /// `autocorrelation` (eq. 19) or `loupas`; the default depends on the node kind.
+    pub estimator: Option<Estimator>,
+    /// Slow-time lag, 1 ..= 64.
+    pub lag: usize,
+    /// Spatial averaging window [rows (z), columns (x)], each 1 ..= 64 (MUST `M`).
+    pub window: [usize; 2],
+    /// `hamming` (MUST) or `boxcar`.
+    pub window_shape: WindowShape,
+    /// Aliasing flag threshold as a fraction of the Nyquist velocity, in (0, 1].
+    pub alias_fraction: f64,
+    /// Polynomial-regression clutter filter order over slow time (0 = mean removal); absent: none.
+    pub clutter_order: Option<usize>,
+}
+
+impl Default for DopplerNodeParams {
+    fn default() -> Self {
+        Self {
+            estimator: None,
+            lag: 1,
+            window: [1, 1],
+            window_shape: WindowShape::Hamming,
+            alias_fraction: 0.9,
+            clutter_order: None,
+        }
+    }
+}
+
+impl DopplerNodeParams {
+    fn doppler(&self, fc: f64, c: f64, prf: f64, default: Estimator) -> DopplerParams {
+        DopplerParams {
+            fc,
+            c,
+            prf,
+            lag: self.lag,
+            window: self.window,
+            window_shape: self.window_shape,
+            estimator: self.estimator.unwrap_or(default),
+            alias_fraction: self.alias_fraction,
+        }
+    }
+    fn check(&self) -> Result<(), String> {
+        self.doppler(5e6, 1540.0, 1e4, Estimator::Autocorrelation).validate().map_err(|e| e.to_string())?;
+        if let Some(o) = self.clutter_order {
+            if o > 8 {
+                return Err(format!("clutter_order = {o} is out of range: 0 ..= 8 (and below the packet size)"));
+            }
+        }
+        Ok(())
+    }
+}
+
+pub fn validate_doppler(v: &serde_json::Value) -> Result<(), String> {
+    parse::<DopplerNodeParams>(v)?.check()
+}
+
+/// One packet's frames of one (tx angle, rx angle) pair.
+struct Stream {
+    header: IqFrameHeaderV1,
+    frames: Vec<Vec<C32>>,
+}
+
+/// Products of one packet.
+pub struct PacketResult {
+    /// One Doppler map header + planes (velocity, power, variance, flags) per angle pair.
+    pub maps: Vec<(DopplerMapHeaderV1, Vec<f32>)>,
+    /// The vector field header + planes (vx, vz, flags, power).
+    pub vector: (VectorFieldHeaderV1, Vec<f32>),
+}
+
+/// What the Doppler node does per packet, without IPC.
+pub struct DopplerNode {
+    params: DopplerNodeParams,
+    default_estimator: Estimator,
+    packet: Option<u32>,
+    streams: BTreeMap<(u64, u64), Stream>,
+    map: DopplerMap,
+    vec: BfVectorField,
+}
+
+impl DopplerNode {
+    pub fn new(params: DopplerNodeParams, default_estimator: Estimator) -> Result<Self, String> {
+        params.check()?;
+        Ok(Self {
+            params,
+            default_estimator,
+            packet: None,
+            streams: BTreeMap::new(),
+            map: DopplerMap::default(),
+            vec: BfVectorField::default(),
+        })
+    }
+
+    /// Adds one I/Q image; returns the finished previous packet if this image starts a new one.
+    pub fn push(&mut self, h: &IqFrameHeaderV1, iq: &[Complex32]) -> anyhow::Result<Option<PacketResult>> {
+        let n = h.grid.nx as usize * h.grid.nz as usize;
+        if iq.len() != n || n == 0 {
+            anyhow::bail!(
+                "I/Q frame {}: {} samples for a {}×{} grid",
+                h.common.frame_id,
+                iq.len(),
+                h.grid.nz,
+                h.grid.nx
+            );
+        }
+        let done = match self.packet {
+            Some(p) if p != h.packet => self.finish()?,
+            _ => None,
+        };
+        self.packet = Some(h.packet);
+        let key = (h.tx_angle.to_bits(), h.rx_angle.to_bits());
+        let s = self.streams.entry(key).or_insert_with(|| Stream { header: *h, frames: Vec::new() });
+        if s.header.grid != h.grid {
+            anyhow::bail!("I/Q frame {}: the grid changed within packet {}", h.common.frame_id, h.packet);
+        }
+        s.frames.push(iq.iter().map(|c| C32::new(c.re, c.im)).collect());
+        Ok(done)
+    }
+
+    /// Finishes the current packet (end of stream); None if nothing is pending.
+    pub fn finish(&mut self) -> anyhow::Result<Option<PacketResult>> {
+        if self.streams.is_empty() {
+            return Ok(None);
+        }
+        let streams = std::mem::take(&mut self.streams);
+        let first = match streams.values().next() {
+            Some(s) => s.header,
+            None => return Ok(None),
+        };
+        let (nx, nz) = (first.grid.nx as usize, first.grid.nz as usize);
+        let n = nx * nz;
+        let mut maps = Vec::new();
+        let mut angles = Vec::new();
+        let mut velocities: Vec<(Vec<f32>, Vec<u8>)> = Vec::new();
+        let mut power_sum = vec![0.0f32; n];
+        let mut frame_id = 0;
+        let mut t_valid = 0.0;
+        for s in streams.into_values() {
+            let h = s.header;
+            if s.frames.iter().any(|f| f.len() != n) || h.grid != first.grid {
+                anyhow::bail!("packet {}: the angle pairs do not share one grid", h.packet);
+            }
+            let dp = self.params.doppler(h.fc, h.c, h.prf, self.default_estimator);
+            if s.frames.len() <= dp.lag {
+                anyhow::bail!(
+                    "packet {} (rx {:.1}°): {} frame(s), need more than lag = {}",
+                    h.packet,
+                    h.rx_angle.to_degrees(),
+                    s.frames.len(),
+                    dp.lag
+                );
+            }
+            let mut frames = s.frames;
+            if let Some(order) = self.params.clutter_order {
+                if order + 1 >= frames.len() {
+                    anyhow::bail!(
+                        "clutter_order = {order} needs a packet of more than {} frames, got {}",
+                        order + 1,
+                        frames.len()
+                    );
+                }
+                let cf = ClutterFilter::new(order, frames.len())?;
+                let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+                cf.apply_frames(&mut refs)?;
+            }
+            let mut est = DopplerEstimator::new(dp.clone(), nx, nz, h.grid.dz)?;
+            if dp.estimator == Estimator::Loupas {
+                // Nominal axial delay step of this angle pair: (cos θt + cos θr)·dz/c.
+                let step = (h.tx_angle.cos() + h.rx_angle.cos()) * h.grid.dz / h.c;
+                est.set_axial_step(&vec![step; n])?;
+            }
+            let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+            est.estimate(Packet::Frames(&refs), &mut self.map)?;
+            let vn = self.map.nyquist;
+            let norm = 2.0 * (vn / std::f64::consts::PI).powi(2);
+            let mut planes = Vec::with_capacity(4 * n);
+            planes.extend_from_slice(&self.map.velocity);
+            planes.extend_from_slice(&self.map.power);
+            planes.extend(self.map.variance.iter().map(|v| (*v as f64 / norm) as f32));
+            planes.extend(self.map.flags.iter().map(|f| *f as f32));
+            for (ps, p) in power_sum.iter_mut().zip(&self.map.power) {
+                *ps += p;
+            }
+            let mut mh = DopplerMapHeaderV1 {
+                grid: h.grid,
+                fc: h.fc,
+                c: h.c,
+                prf: h.prf,
+                rx_angle: h.rx_angle,
+                tx_angle: h.tx_angle,
+                nyquist_velocity: vn,
+                packet: h.packet,
+                packet_size: frames.len() as u32,
+                n_planes: 4,
+                estimator: match dp.estimator {
+                    Estimator::Autocorrelation => 0,
+                    Estimator::Loupas => 1,
+                },
+                ..Default::default()
+            };
+            mh.plane_ids[..4].copy_from_slice(&[plane::VELOCITY, plane::POWER, plane::VARIANCE, plane::FLAGS]);
+            frame_id = frame_id.max(h.common.frame_id);
+            t_valid = h.common.t_valid;
+            mh.common = MsgHeaderV1 { frame_id: h.common.frame_id, t_valid: h.common.t_valid, ..Default::default() };
+            angles.push((h.tx_angle, h.rx_angle));
+            velocities.push((self.map.velocity.clone(), self.map.flags.clone()));
+            maps.push((mh, planes));
+        }
+        if velocities.len() < 2 {
+            anyhow::bail!(
+                "packet {}: vector Doppler needs at least two (transmit, receive) angle pairs, got {} — give the beamformer two rx_angles_deg",
+                first.packet,
+                velocities.len()
+            );
+        }
+        let inputs: Vec<VectorInput> = velocities
+            .iter()
+            .zip(&angles)
+            .map(|((v, f), (tx, rx))| VectorInput {
+                velocity: v,
+                flags: f,
+                projection: Projection::Nominal { tx_tilt: *tx, rx_angle: *rx },
+            })
+            .collect();
+        sonoflow_beamform::solve_vector(&inputs, &mut self.vec)?;
+        let k = velocities.len() as f32;
+        let mut planes = Vec::with_capacity(4 * n);
+        planes.extend_from_slice(&self.vec.vx);
+        planes.extend_from_slice(&self.vec.vz);
+        planes.extend(self.vec.flags.iter().map(|f| *f as f32));
+        planes.extend(power_sum.iter().map(|p| p / k));
+        let mut vh = VectorFieldHeaderV1 {
+            grid: first.grid,
+            n_planes: 4,
+            source: VECTOR_RAW,
+            packet: first.packet,
+            converged: 1,
+            ..Default::default()
+        };
+        vh.plane_ids[..4].copy_from_slice(&[plane::VX, plane::VZ, plane::FLAGS, plane::POWER]);
+        vh.common = MsgHeaderV1 { frame_id, t_valid, ..Default::default() };
+        Ok(Some(PacketResult { maps, vector: (vh, planes) }))
+    }
+}
+
+fn run_doppler_with(mut kit: Kit, default: Estimator) -> anyhow::Result<()> {
+    let p: DopplerNodeParams = parse(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut node = DopplerNode::new(p, default).map_err(anyhow::Error::msg)?;
+    let mut input = kit.input::<IqFrame>("iq")?;
+    let mut vout = kit.output::<VectorField>("vector")?;
+    let mut mout = match kit.cfg.outputs.contains_key("maps") {
+        true => Some(kit.output::<DopplerMapMsg>("maps")?),
+        false => None,
+    };
+    match mout.as_mut() {
+        Some(m) => kit.handshake(&mut [&mut input, &mut vout, m])?,
+        None => kit.handshake(&mut [&mut input, &mut vout])?,
+    }
+    let mut last_t = 0.0;
+    let mut publish = |kit: &mut Kit, r: PacketResult, compute: u64| -> anyhow::Result<()> {
+        if let Some(m) = mout.as_mut() {
+            for (mut h, planes) in r.maps {
+                h.common.compute_ns = compute;
+                m.publish_copy(h, &planes)?;
+                kit.stats.messages_out += 1;
+            }
+        }
+        let (mut vh, planes) = r.vector;
+        vh.common.compute_ns = compute;
+        vout.publish_copy(vh, &planes)?;
+        kit.stats.messages_out += 1;
+        kit.stats.bytes_out += (planes.len() * 4) as u64;
+        kit.record(vh.common.frame_id, vh.common.t_valid, compute)?;
+        Ok(())
+    };
+    let mut acc_ns = 0u64;
+    for_each(&mut kit, &mut input, |kit, sample| {
+        let t0 = process_cpu_ns();
+        let h = *sample.user_header();
+        let done = node.push(&h, sample.payload())?;
+        kit.stats.messages_in += 1;
+        acc_ns += process_cpu_ns() - t0;
+        if let Some(r) = done {
+            publish(kit, r, acc_ns)?;
+            acc_ns = 0;
+        }
+        last_t = h.common.t_valid;
+        Ok(Flow::Continue)
+    })?;
+    let t0 = process_cpu_ns();
+    if let Some(r) = node.finish()? {
+        acc_ns += process_cpu_ns() - t0;
+        publish(&mut kit, r, acc_ns)?;
+    }
+    vout.publish_eos(last_t)?;
+    if let Some(m) = mout.as_mut() {
+        m.publish_eos(last_t)?;
+    }
+    kit.stats.gaps = input.gaps;
+    kit.finish()?;
+    Ok(())
+}
+
+pub fn run_doppler(kit: Kit) -> anyhow::Result<()> {
+    run_doppler_with(kit, Estimator::Autocorrelation)
+}
+
+pub fn run_doppler_loupas(kit: Kit) -> anyhow::Result<()> {
+    run_doppler_with(kit, Estimator::Loupas)
+}
