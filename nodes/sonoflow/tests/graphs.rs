@@ -420,3 +420,40 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         assert!((m[0] / m[2] - 1.0).abs() < 0.25, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
     }
 }
+
+/// An estimator written outside the built-in kinds (its own executable, wire format only) is
+/// swapped in by the launch file and gives the built-in lag-1 autocorrelation's answer.
+#[test]
+fn external_doppler_estimator_swaps_in_and_agrees_with_the_built_in() {
+    let run = |swap: Option<&str>| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut args = vec!["--set", "flow.schedule.n_packets=1", "--set", "flow.density_per_mm2=4.0"];
+        if let Some(s) = swap {
+            args.extend(["--swap", s]);
+        }
+        let out = run_graph("launch/quickstart.toml", dir.path(), &args);
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(0), "{err}");
+        let rec = dir.path().join("recording.mcap");
+        let (h, v) = cdr::decode::<VectorField>(&read_topic(&rec, "vector")[0]).unwrap();
+        (h, v, read_topic(&rec, "maps").len(), err)
+    };
+    let (hb, vb, maps_b, _) = run(None);
+    let (he, ve, maps_e, err) = run(Some("doppler=external"));
+    assert!(err.contains("sonoflow-example-doppler"), "the external executable ran: {err}");
+    assert_eq!((maps_b, maps_e), (2, 2));
+    assert_eq!((hb.grid, hb.plane_ids, hb.packet), (he.grid, he.plane_ids, he.packet));
+    let n = (hb.grid.nx * hb.grid.nz) as usize;
+    // Same I/Q in both runs (deterministic upstream); both sum in f64 and round to f32, in a
+    // different order: agreement to a few f32 ulps of the Nyquist velocity (0.77 m/s).
+    let (mut compared, mut worst) = (0, 0.0f32);
+    for i in 0..n {
+        assert_eq!(vb[2 * n + i], ve[2 * n + i], "pixel {i}: flags differ");
+        if vb[2 * n + i] == 0.0 {
+            worst = worst.max((vb[i] - ve[i]).abs()).max((vb[n + i] - ve[n + i]).abs());
+            compared += 1;
+        }
+    }
+    assert!(compared > n / 2, "{compared} of {n} pixels estimated");
+    assert!(worst < 1e-5, "largest difference {worst} m/s");
+}
