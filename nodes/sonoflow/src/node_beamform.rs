@@ -273,6 +273,23 @@ pub struct DopplerNodeParams {
     pub alias_fraction: f64,
     /// Polynomial-regression clutter filter order over slow time (0 = mean removal); absent: none.
     pub clutter_order: Option<usize>,
+    /// Receive aperture of the beamformer, to project each pixel's Doppler on the directions of
+    /// the elements actually summed there (the array edge clips steered sub-apertures). Absent:
+    /// the nominal plane-wave projection of the transmit and receive angles.
+    pub aperture: Option<ApertureParams>,
+}
+
+/// The beamformer's receive geometry (MUST names), for per-pixel Doppler projections.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ApertureParams {
+    /// Element pitch (m).
+    pub pitch: f64,
+    /// Number of elements.
+    #[serde(alias = "Nelements")]
+    pub n_elements: usize,
+    /// Receive f-number (> 0), as in the beamformer.
+    pub fnumber: f64,
 }
 
 impl Default for DopplerNodeParams {
@@ -284,6 +301,7 @@ impl Default for DopplerNodeParams {
             window_shape: WindowShape::Hamming,
             alias_fraction: 0.9,
             clutter_order: None,
+            aperture: None,
         }
     }
 }
@@ -308,12 +326,51 @@ impl DopplerNodeParams {
                 return Err(format!("clutter_order = {o} is out of range: 0 ..= 8 (and below the packet size)"));
             }
         }
+        if let Some(a) = &self.aperture {
+            let grid = Grid { x0: 0.0, z0: 0.01, dx: 1e-3, dz: 1e-3, nx: 1, nz: 1 };
+            aperture_projection(a, 5e6, 1540.0, 0.0, 0.0, &grid).map_err(|e| format!("aperture: {e}"))?;
+        }
         Ok(())
     }
 }
 
 pub fn validate_doppler(v: &serde_json::Value) -> Result<(), String> {
     parse::<DopplerNodeParams>(v)?.check()
+}
+
+/// Per-pixel Doppler projection vectors of a plane-wave transmit at `tx` and receive angle `rx`
+/// (rad) through the aperture `a`: `a = −(c/2)∇τ` averaged over the elements the beamformer sums
+/// at each pixel ([`DasPlan::projection`]). The plan is built with a sampling long enough that
+/// no element is dropped for lack of samples.
+pub fn aperture_projection(
+    a: &ApertureParams,
+    fc: f64,
+    c: f64,
+    tx: f64,
+    rx: f64,
+    grid: &Grid,
+) -> anyhow::Result<Vec<[f32; 2]>> {
+    if !(a.fnumber.is_finite() && a.fnumber > 0.0) {
+        anyhow::bail!("fnumber = {} is out of range: > 0", a.fnumber);
+    }
+    let fs = 4.0 * fc;
+    let width = a.pitch * a.n_elements as f64;
+    let z_max = grid.z0 + grid.dz * grid.nz as f64;
+    let x_span = grid.x0.abs().max((grid.x0 + grid.dx * grid.nx as f64).abs()) + width;
+    let longest = 2.0 * (z_max.hypot(x_span) + width) / c;
+    let n_samples = ((longest * fs).ceil() as usize + 16).min(1 << 22);
+    let dp = DasParams {
+        fc,
+        c,
+        fs,
+        t0: 0.0,
+        pitch: a.pitch,
+        n_elements: a.n_elements,
+        fnumber: a.fnumber,
+        rx_angle: rx,
+        interpolation: Interpolation::Linear,
+    };
+    Ok(DasPlan::new(&dp, &TxWave::PlaneWave { tilt: tx }, grid, n_samples)?.projection())
 }
 
 /// One packet's frames of one (tx angle, rx angle) pair.
@@ -338,6 +395,8 @@ pub struct DopplerNode {
     streams: BTreeMap<(u64, u64), Stream>,
     map: DopplerMap,
     vec: BfVectorField,
+    /// Per-pixel projections per (tx, rx, grid) when `aperture` is set.
+    projections: BTreeMap<(u64, u64, [u64; 4], u32, u32), Vec<[f32; 2]>>,
 }
 
 impl DopplerNode {
@@ -350,6 +409,7 @@ impl DopplerNode {
             streams: BTreeMap::new(),
             map: DopplerMap::default(),
             vec: BfVectorField::default(),
+            projections: BTreeMap::new(),
         })
     }
 
@@ -475,13 +535,41 @@ impl DopplerNode {
                 velocities.len()
             );
         }
+        if let Some(a) = &self.params.aperture {
+            let g = first.grid;
+            let grid = Grid { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as usize, nz: g.nz as usize };
+            for (tx, rx) in &angles {
+                let key = (tx.to_bits(), rx.to_bits(), [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits), g.nx, g.nz);
+                if !self.projections.contains_key(&key) {
+                    let pr = aperture_projection(a, first.fc, first.c, *tx, *rx, &grid)?;
+                    self.projections.insert(key, pr);
+                }
+            }
+        }
+        let g = first.grid;
+        let projections: Vec<Option<&Vec<[f32; 2]>>> = angles
+            .iter()
+            .map(|(tx, rx)| {
+                self.projections.get(&(
+                    tx.to_bits(),
+                    rx.to_bits(),
+                    [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits),
+                    g.nx,
+                    g.nz,
+                ))
+            })
+            .collect();
         let inputs: Vec<VectorInput> = velocities
             .iter()
             .zip(&angles)
-            .map(|((v, f), (tx, rx))| VectorInput {
+            .zip(&projections)
+            .map(|(((v, f), (tx, rx)), pr)| VectorInput {
                 velocity: v,
                 flags: f,
-                projection: Projection::Nominal { tx_tilt: *tx, rx_angle: *rx },
+                projection: match (&self.params.aperture, pr) {
+                    (Some(_), Some(p)) => Projection::PerPixel(p),
+                    _ => Projection::Nominal { tx_tilt: *tx, rx_angle: *rx },
+                },
             })
             .collect();
         sonoflow_beamform::solve_vector(&inputs, &mut self.vec)?;
@@ -569,4 +657,43 @@ pub fn run_doppler(kit: Kit) -> anyhow::Result<()> {
 
 pub fn run_doppler_loupas(kit: Kit) -> anyhow::Result<()> {
     run_doppler_with(kit, Estimator::Loupas)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn aperture_projection_is_nominal_inside_the_array_and_clipped_at_its_edge() {
+        let a = ApertureParams { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5 };
+        // Two pixels at 20 mm depth: x = 0 (both ±15° sub-apertures inside the 38 mm array) and
+        // x = 12 mm (the −15° sub-aperture, centred at x + 5.4 mm, is clipped by the edge at 19 mm).
+        let grid = Grid { x0: 0.0, z0: 0.02, dx: 12e-3, dz: 1e-3, nx: 2, nz: 1 };
+        let rx = (-15f64).to_radians();
+        let p = aperture_projection(&a, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+        let nom = sonoflow_beamform::nominal_projection(0.0, rx);
+        // Centre: the mean direction over a ±18° aperture about −15° is close to −15° itself.
+        assert!((p[0][0] as f64 - nom[0]).abs() < 0.01 && (p[0][1] as f64 - nom[1]).abs() < 0.01, "{p:?} vs {nom:?}");
+        // Edge: fewer oblique elements, so the lateral sensitivity |a_x| shrinks.
+        assert!((p[1][0] as f64).abs() < 0.9 * nom[0].abs(), "{p:?} vs {nom:?}");
+        assert!(aperture_projection(&ApertureParams { fnumber: 0.0, ..a }, 5e6, 1540.0, 0.0, rx, &grid).is_err());
+    }
+
+    #[test]
+    fn doppler_params_errors_name_the_field() {
+        let bad = |v: serde_json::Value, needle: &str| {
+            let e = validate_doppler(&v).unwrap_err();
+            assert!(e.contains(needle), "{e}");
+        };
+        bad(serde_json::json!({"lag": 0}), "lag");
+        bad(serde_json::json!({"window": [0, 3]}), "window");
+        bad(serde_json::json!({"clutter_order": 20}), "clutter_order");
+        bad(serde_json::json!({"aperture": {"pitch": 3e-4, "n_elements": 128, "fnumber": 0.0}}), "fnumber");
+        bad(serde_json::json!({"estimator": "music"}), "estimator");
+        let e = validate_beamformer(&serde_json::json!({"rx_angles_deg": [95.0]})).unwrap_err();
+        assert!(e.contains("rx_angles_deg[0]"), "{e}");
+        let e = validate_beamformer(&serde_json::json!({"fnumber": 0.0})).unwrap_err();
+        assert!(e.contains("fnumber > 0"), "{e}");
+    }
 }

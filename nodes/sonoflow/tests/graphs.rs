@@ -407,17 +407,18 @@ fn quickstart_chain_measures_the_vessel_velocity() {
             gh.smoothing_s, m[0], m[1], m[2], m[3]
         );
         // Measured (one packet of 32 frames, no spatial window, 1547 pixels ≥ 2 px inside the
-        // lumen): raw RMS error 0.116 m/s for |v| 0.41 m/s, regularised 0.094–0.097; mean vz
-        // within 3 % of the truth, mean vx 17–19 % low (the lateral component is the difference
-        // of the two sub-aperture Doppler values divided by sin 15°, so a 1 cm/s bias between
-        // them is 4 cm/s in vx; see the closing note of issue 4). The bounds below leave room for
+        // lumen, per-pixel aperture projections): raw RMS error 0.108–0.112 m/s for |v| 0.41 m/s,
+        // regularised 0.083–0.085; mean vz within 3 % of the truth, mean vx 10–13 % low (the
+        // lateral component is the difference of the two sub-aperture Doppler values divided by
+        // sin 15°, so a 1 cm/s bias between them is 4 cm/s in vx; nominal projections: 17–19 %
+        // low; see the closing note of issue 4). The bounds below leave room for
         // speckle (about 50 independent resolution cells: ±4 % on the means) without accepting
         // a sign error or a wrong projection (either would give ≥ 100 % errors).
         assert!(cnt > 1000);
         assert!(e_raw < 0.35 * v_rms, "{estimator}: raw error {e_raw} vs |v| {v_rms}");
         assert!(e_reg < e_raw, "{estimator}: regularised {e_reg} vs raw {e_raw}");
         assert!((m[1] / m[3] - 1.0).abs() < 0.08, "{estimator}: mean vz {} vs truth {}", m[1], m[3]);
-        assert!((m[0] / m[2] - 1.0).abs() < 0.25, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
+        assert!((m[0] / m[2] - 1.0).abs() < 0.2, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
     }
 }
 
@@ -425,13 +426,25 @@ fn quickstart_chain_measures_the_vessel_velocity() {
 /// swapped in by the launch file and gives the built-in lag-1 autocorrelation's answer.
 #[test]
 fn external_doppler_estimator_swaps_in_and_agrees_with_the_built_in() {
+    // The quickstart with the built-in node's nominal plane-wave projection (the external
+    // estimator implements only that one): its `aperture` parameter removed.
+    let scene = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("launch/quickstart.toml")).unwrap();
+    let mut file: toml::Table = toml::from_str(&text).unwrap();
+    let doppler = file["nodes"]["doppler"].as_table().unwrap().clone();
+    let mut doppler = doppler;
+    doppler["params"].as_table_mut().unwrap().remove("aperture");
+    file["nodes"].as_table_mut().unwrap().insert("doppler".into(), doppler.into());
+    let launch = scene.path().join("quickstart-nominal.toml");
+    std::fs::write(&launch, toml::to_string(&file).unwrap()).unwrap();
+    let launch = launch.to_str().unwrap().to_string();
     let run = |swap: Option<&str>| {
         let dir = tempfile::tempdir().unwrap();
         let mut args = vec!["--set", "flow.schedule.n_packets=1", "--set", "flow.density_per_mm2=4.0"];
         if let Some(s) = swap {
             args.extend(["--swap", s]);
         }
-        let out = run_graph("launch/quickstart.toml", dir.path(), &args);
+        let out = run_graph(&launch, dir.path(), &args);
         let err = String::from_utf8_lossy(&out.stderr).into_owned();
         assert_eq!(out.status.code(), Some(0), "{err}");
         let rec = dir.path().join("recording.mcap");

@@ -28,11 +28,14 @@ use std::time::Duration;
 struct Params {
     /// Slow-time lag (1 ..= 16).
     lag: usize,
+    /// The built-in node's receive-aperture table: accepted so that the same launch file works,
+    /// but this example always uses the nominal plane-wave projection (it says so at start).
+    aperture: Option<serde_json::Value>,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { lag: 1 }
+        Self { lag: 1, aperture: None }
     }
 }
 
@@ -61,6 +64,11 @@ fn run() -> Result<(), Error> {
     let p: Params = kit.params()?;
     if !(1..=16).contains(&p.lag) {
         return Err(format!("params.lag = {} is out of range: 1 ..= 16", p.lag).into());
+    }
+    if p.aperture.is_some() {
+        eprintln!(
+            "sonoflow-example-doppler: `aperture` ignored: this estimator uses the nominal plane-wave projection"
+        );
     }
     let mut input = kit.input::<IqFrame>("iq")?;
     let mut ports = Ports {
