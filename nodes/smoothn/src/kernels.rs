@@ -29,6 +29,7 @@ pub(crate) fn for_each_chunk<F: Fn(usize, &mut [f64]) + Sync + Send>(out: &mut [
 
 /// `Σ_i f(a_i, b_i)` accumulated in 4 interleaved lanes: a fixed order (deterministic) that the
 /// compiler can vectorise.
+#[inline(always)]
 pub(crate) fn lane_sum(a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64) -> f64 {
     let mut acc = [0.0f64; 4];
     let body = a.len() / 4 * 4;
@@ -56,12 +57,13 @@ pub(crate) fn gamma_sums(
 ) -> [f64; 2] {
     let work = |i: usize, g: &mut [f64]| -> [f64; 2] {
         let range = i * CHUNK..i * CHUNK + g.len();
-        for (g, l) in g.iter_mut().zip(&lm[range.clone()]) {
-            *g = 1.0 / (1.0 + s * l);
+        let (lm, pw) = (&lm[range.clone()], power.map(|pw| &pw[range]));
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports AVX2.
+            return unsafe { gamma_chunk_avx2(g, lm, pw, s) };
         }
-        let tr = lane_sum(g, g, |g, _| g);
-        let rss = power.map_or(0.0, |pw| lane_sum(g, &pw[range], |g, p| p * (g - 1.0) * (g - 1.0)));
-        [tr, rss]
+        gamma_chunk(g, lm, pw, s)
     };
     partials.clear();
     #[cfg(feature = "parallel")]
@@ -75,8 +77,50 @@ pub(crate) fn gamma_sums(
     partials.iter().fold([0.0, 0.0], |acc, p| [acc[0] + p[0], acc[1] + p[1]])
 }
 
+/// One chunk of [`gamma_sums`].
+#[inline(always)]
+fn gamma_chunk(g: &mut [f64], lm: &[f64], power: Option<&[f64]>, s: f64) -> [f64; 2] {
+    for (g, l) in g.iter_mut().zip(lm) {
+        *g = 1.0 / (1.0 + s * l);
+    }
+    let tr = lane_sum(g, g, |g, _| g);
+    let rss = power.map_or(0.0, |pw| lane_sum(g, pw, |g, p| p * (g - 1.0) * (g - 1.0)));
+    [tr, rss]
+}
+
+/// [`gamma_chunk`] compiled for AVX2 (the same operations in the same order, so the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn gamma_chunk_avx2(g: &mut [f64], lm: &[f64], power: Option<&[f64]>, s: f64) -> [f64; 2] {
+    gamma_chunk(g, lm, power, s)
+}
+
+/// AVX2 available (cached by the standard library).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
 /// `z ← rf·ẑ + (1 − rf)·z`; returns `[‖z_old − z‖², ‖z‖², ‖z_old‖²]`, summed in 4 lanes.
 pub(crate) fn relax(z: &mut [f64], zhat: &[f64], rf: f64) -> [f64; 3] {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2.
+        return unsafe { relax_avx2(z, zhat, rf) };
+    }
+    relax_body(z, zhat, rf)
+}
+
+/// [`relax`] compiled for AVX2 (the same operations in the same order, so the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn relax_avx2(z: &mut [f64], zhat: &[f64], rf: f64) -> [f64; 3] {
+    relax_body(z, zhat, rf)
+}
+
+#[inline(always)]
+fn relax_body(z: &mut [f64], zhat: &[f64], rf: f64) -> [f64; 3] {
     let mut acc = [[0.0f64; 4]; 3];
     let step = |zold: f64, zhat: f64, acc: &mut [[f64; 4]; 3], l: usize| {
         let znew = rf * zhat + (1.0 - rf) * zold;

@@ -22,6 +22,8 @@
 //! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
 
 mod nd;
+#[cfg(target_arch = "x86_64")]
+mod simd;
 
 use std::sync::Arc;
 
@@ -183,6 +185,7 @@ impl Dct1d {
     /// imaginary part of complex line p; an odd last line pairs with zeros; `weight` multiplies
     /// element-wise), prepares them and runs the batched FFT. Forward: Makhoul reordering
     /// `v = [x0, x2, …, x3, x1]`. Inverse: `V_k = b_k (X_k − i X_(n−k))`.
+    #[inline(always)]
     fn load(&self, src: &[f64], weight: Option<&[f64]>, inverse: bool, s: &mut LineScratch) {
         let n = self.n;
         let lines = src.len() / n;
@@ -211,6 +214,7 @@ impl Dct1d {
     }
 
     /// `v_q = x_2q` (q < ⌈n/2⌉), `v_(n−1−q) = x_2q+1`, lines a and b as real and imaginary parts.
+    #[inline(always)]
     fn pack_forward(&self, v: &mut [C64], xa: &[f64], xb: &[f64]) {
         let n = self.n;
         let (v, xa, xb) = (&mut v[..n], &xa[..n], &xb[..n]);
@@ -226,6 +230,7 @@ impl Dct1d {
     /// `U = X^(a) g^(a) + i X^(b) g^(b)`; `V_k = b_k (U_k − i U_(n−k))`,
     /// `V_(n−k) = conj(b_k) (U_k + i U_(n−k))`, `V_0 = b_0 U_0`, and for even n
     /// `V_(n/2) = b (1 − i) U_(n/2)` with `b (1 − i) = √2/(σ n)` real.
+    #[inline(always)]
     fn pack_inverse<const WEIGHTED: bool>(&self, v: &mut [C64], xa: &[f64], xb: &[f64], ga: &[f64], gb: &[f64]) {
         let n = self.n;
         let (v, xa, xb, ga, gb) = (&mut v[..n], &xa[..n], &xb[..n], &ga[..n], &gb[..n]);
@@ -248,7 +253,15 @@ impl Dct1d {
         let (br, bi) = (&self.b_re[1..=m], &self.b_im[1..=m]);
         let (xal, xah, xbl, xbh) = (&xa[1..=m], &xa[n - m..], &xb[1..=m], &xb[n - m..]);
         let (gal, gah, gbl, gbh) = (&ga[1..=m], &ga[n - m..], &gb[1..=m], &gb[n - m..]);
-        // Two passes with forward stores (the reversed partner is read), which vectorise.
+        // One pass over k = j + 1 (forward) and its partner n − k (reversed), in blocks of four
+        // (the partner block is loaded and reversed as an array), which vectorises.
+        let step = |j: usize, (ur, ui, rr, ri): (f64, f64, f64, f64)| {
+            // V_k = b (U − iR), V_(n−k) = conj(b) (U + iR).
+            let (br, bi) = (br[j], bi[j]);
+            let (s1, s2) = (ur + ri, ui - rr);
+            let (d1, d2) = (ur - ri, ui + rr);
+            (C64::new(br * s1 - bi * s2, br * s2 + bi * s1), C64::new(br * d1 + bi * d2, br * d2 - bi * d1))
+        };
         let load = |j: usize, r: usize| {
             if WEIGHTED {
                 (xal[j] * gal[j], xbl[j] * gbl[j], xah[r] * gah[r], xbh[r] * gbh[r])
@@ -256,23 +269,25 @@ impl Dct1d {
                 (xal[j], xbl[j], xah[r], xbh[r])
             }
         };
-        for j in 0..m {
-            // V_k = b (U − iR).
-            let (ur, ui, rr, ri) = load(j, m - 1 - j);
-            let (s1, s2) = (ur + ri, ui - rr);
-            lo[j] = C64::new(br[j] * s1 - bi[j] * s2, br[j] * s2 + bi[j] * s1);
+        #[allow(unused_mut)]
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: AVX2 is available.
+            done =
+                unsafe { simd::pack_inverse::<WEIGHTED>(lo, hi, [br, bi], [xal, xbl, xah, xbh], [gal, gbl, gah, gbh]) };
         }
-        for (t, h) in hi.iter_mut().enumerate() {
-            // V_(n−k) = conj(b) (U + iR), k = m − t.
-            let j = m - 1 - t;
-            let (ur, ui, rr, ri) = load(j, t);
-            let (d1, d2) = (ur - ri, ui + rr);
-            *h = C64::new(br[j] * d1 + bi[j] * d2, br[j] * d2 - bi[j] * d1);
+        // Scalar twin of the AVX2 body (same operations), and the tail.
+        #[allow(clippy::needless_range_loop)]
+        for j in done..m {
+            let r = m - 1 - j;
+            (lo[j], hi[r]) = step(j, load(j, r));
         }
     }
 
     /// DCT-II coefficients of the pair spectrum `v` into lines `ya` (real part) and `yb`:
     /// `X_k = P + Q`, `X_(n−k) = i (P − Q)` with `P = a_k V_k`, `Q = conj(a_k) V_(n−k)`.
+    #[inline(always)]
     fn unpack_forward(&self, v: &[C64], out: &mut impl PairSink) {
         let n = self.n;
         let (v, a) = (&v[..n], &self.a[..n]);
@@ -292,6 +307,7 @@ impl Dct1d {
     }
 
     /// Samples of the pair from the inverse FFT output `v`: `x_2q = v_q`, `x_2q+1 = v_(n−1−q)`.
+    #[inline(always)]
     fn unpack_inverse(&self, v: &[C64], out: &mut impl PairSink) {
         let n = self.n;
         let v = &v[..n];
@@ -308,6 +324,7 @@ impl Dct1d {
 
     /// Transforms the rows (length n) of `src` into `dst`: row-major, or transposed (n × rows; the
     /// two lines of a pair land side by side in each output row).
+    #[inline(always)]
     fn rows(
         &self,
         src: &[f64],
@@ -327,6 +344,10 @@ impl Dct1d {
                 self.store_block(&mut dst[r0 * n..(r0 + nb) * n], inverse, s);
                 continue;
             }
+            if inverse && nb.is_multiple_of(2) {
+                self.unpack_inverse_columns(&s.c2[..nb / 2 * n], dst, r0, rows);
+                continue;
+            }
             for (p, v) in s.c2.chunks_exact(n).take(nb.div_ceil(2)).enumerate() {
                 let r = r0 + 2 * p;
                 let dst = &mut dst[..];
@@ -340,8 +361,32 @@ impl Dct1d {
         }
     }
 
+    /// [`Self::unpack_inverse`] of every pair of a block (`c`: pairs × n) into adjacent columns
+    /// `r0 …` of `dst` (row stride `rows`): output row j receives the block's samples j, one cache
+    /// line for a full block.
+    #[inline(always)]
+    fn unpack_inverse_columns(&self, c: &[C64], dst: &mut [f64], r0: usize, rows: usize) {
+        let n = self.n;
+        let width = 2 * (c.len() / n);
+        let put = |dst: &mut [f64], j: usize, q: usize| {
+            let d = &mut dst[j * rows + r0..][..width];
+            for (p, d) in d.chunks_exact_mut(2).enumerate() {
+                let v = c[p * n + q];
+                (d[0], d[1]) = (v.re, v.im);
+            }
+        };
+        for q in 0..n / 2 {
+            put(dst, 2 * q, q);
+            put(dst, 2 * q + 1, n - 1 - q);
+        }
+        if n & 1 == 1 {
+            put(dst, n - 1, n / 2);
+        }
+    }
+
     /// Writes the lines of the last load (`out.len()/n` of them) into `out`, row-major; the partner
     /// of an odd last line goes to scratch.
+    #[inline(always)]
     fn store_block(&self, out: &mut [f64], inverse: bool, s: &mut LineScratch) {
         let n = self.n;
         let LineScratch { c2, sink, .. } = s;
@@ -357,6 +402,7 @@ impl Dct1d {
     }
 
     /// [`Self::unpack_forward`] into two row-major lines (index loops over equal-length slices).
+    #[inline(always)]
     fn unpack_forward_rows(&self, v: &[C64], ya: &mut [f64], yb: &mut [f64]) {
         let n = self.n;
         let (v, ya, yb) = (&v[..n], &mut ya[..n], &mut yb[..n]);
@@ -385,6 +431,7 @@ impl Dct1d {
     }
 
     /// [`Self::unpack_inverse`] into two row-major lines.
+    #[inline(always)]
     fn unpack_inverse_rows(&self, v: &[C64], xa: &mut [f64], xb: &mut [f64]) {
         let n = self.n;
         let h = n / 2;
@@ -403,6 +450,7 @@ impl Dct1d {
 
     /// Inverse-transforms the rows of `src` (times `weight`) and returns `Σ w (y − x)²` against the
     /// rows of `y` with weights `w`, without storing the samples.
+    #[inline(always)]
     fn rows_rss(&self, src: &[f64], weight: Option<&[f64]>, y: &[f64], w: &[f64], s: &mut LineScratch) -> f64 {
         let n = self.n;
         let mut total = 0.0;
@@ -425,14 +473,54 @@ impl Dct1d {
     }
 
     /// `Σ w (y − x)²` of the inverse samples `x` of a pair (`BOTH`: line b too) against data rows
-    /// `y` and weights `w`; positions 2q and 2q+1 come from `v_q` and `v_(n−1−q)`. Four running sums
-    /// (line × even/odd position), added in a fixed order.
+    /// `y` and weights `w`; positions 2q and 2q+1 come from `v_q` and `v_(n−1−q)`. Running sums per
+    /// line × even/odd position (both lines: also per parity of q, as the AVX2 kernel), added in a
+    /// fixed order.
+    #[inline(always)]
     fn rss_pair<const BOTH: bool>(&self, v: &[C64], y: [&[f64]; 2], w: [&[f64]; 2]) -> f64 {
         let n = self.n;
         let h = n / 2;
         let (lo, hi) = v[..n].split_at(n - h);
         let hi = &hi[..h];
         let (ya, yb, wa, wb) = (&y[0][..n], &y[1][..n], &w[0][..n], &w[1][..n]);
+        if BOTH {
+            // Lanes [a, b, a', b'] over blocks of two q, even and odd positions (as `simd::rss_pair`).
+            #[allow(unused_mut)]
+            let (mut done, mut acc) = (0, [[0.0f64; 4]; 2]);
+            #[cfg(target_arch = "x86_64")]
+            if simd::available() {
+                // SAFETY: AVX2 is available.
+                (done, acc) = unsafe { simd::rss_pair(lo, hi, [ya, yb], [wa, wb]) };
+            }
+            let body = h / 2 * 2;
+            for q in done..body {
+                let (e, o) = (lo[q], hi[h - 1 - q]);
+                let l = 2 * (q & 1);
+                let (d0, d1) = (ya[2 * q] - e.re, yb[2 * q] - e.im);
+                let (d2, d3) = (ya[2 * q + 1] - o.re, yb[2 * q + 1] - o.im);
+                acc[0][l] += wa[2 * q] * d0 * d0;
+                acc[0][l + 1] += wb[2 * q] * d1 * d1;
+                acc[1][l] += wa[2 * q + 1] * d2 * d2;
+                acc[1][l + 1] += wb[2 * q + 1] * d3 * d3;
+            }
+            let mut tail = 0.0;
+            let mut add = |w: f64, y: f64, x: f64| tail += w * (y - x) * (y - x);
+            if h & 1 == 1 {
+                let q = h - 1;
+                let (e, o) = (lo[q], hi[0]);
+                add(wa[2 * q], ya[2 * q], e.re);
+                add(wb[2 * q], yb[2 * q], e.im);
+                add(wa[2 * q + 1], ya[2 * q + 1], o.re);
+                add(wb[2 * q + 1], yb[2 * q + 1], o.im);
+            }
+            if n & 1 == 1 {
+                let e = lo[h];
+                add(wa[n - 1], ya[n - 1], e.re);
+                add(wb[n - 1], yb[n - 1], e.im);
+            }
+            let [e, o] = acc;
+            return (((e[0] + e[1]) + (e[2] + e[3])) + ((o[0] + o[1]) + (o[2] + o[3]))) + tail;
+        }
         let mut acc = [0.0f64; 4];
         for q in 0..h {
             let (e, o) = (lo[q], hi[h - 1 - q]);
@@ -458,10 +546,51 @@ impl Dct1d {
     }
 
     /// Transforms the rows of `data` in place.
+    #[inline(always)]
     fn rows_in_place(&self, data: &mut [f64], inverse: bool, s: &mut LineScratch) {
         for lines in data.chunks_mut(BLOCK * self.n) {
             self.load(lines, None, inverse, s);
             self.store_block(lines, inverse, s);
+        }
+    }
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+
+    /// The AVX2 kernels and their scalar twins give the same bits (odd and even lengths, line
+    /// counts that leave tails of every size).
+    #[test]
+    fn simd_kernels_match_scalar_bit_for_bit() {
+        for shape in [vec![200, 200], vec![13, 18], vec![7, 9], vec![5, 3, 11], vec![31], vec![16, 1]] {
+            let plan = DctN::new(&shape);
+            let n = plan.len();
+            let f = |i: usize, a: f64| ((i as f64 * a).sin() * 3.0 + (i % 7) as f64 * 0.1).abs();
+            let (x, g, y, w): (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) = (0..n)
+                .map(|i| (f(i, 0.37) - 1.0, 1.0 / (1.0 + f(i, 0.11)), f(i, 0.71), f(i, 0.23) / 3.0))
+                .fold(Default::default(), |mut acc, (a, b, c, d)| {
+                    acc.0.push(a);
+                    acc.1.push(b);
+                    acc.2.push(c);
+                    acc.3.push(d);
+                    acc
+                });
+            let run = |scalar: bool| {
+                simd::FORCE_SCALAR.with(|s| s.set(scalar));
+                let mut s = plan.make_scratch();
+                let (mut out, mut work, mut fwd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                plan.inverse_weighted(&x, Some(&g), &mut out, &mut s);
+                let rss = plan.weighted_rss(&x, Some(&g), &y, &w, &mut work, &mut s);
+                plan.forward(&y, &mut fwd, &mut s);
+                simd::FORCE_SCALAR.with(|s| s.set(false));
+                (out, rss, fwd)
+            };
+            let (a, b) = (run(false), run(true));
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a.0), bits(&b.0), "inverse, shape {shape:?}");
+            assert_eq!(a.1.to_bits(), b.1.to_bits(), "rss, shape {shape:?}");
+            assert_eq!(bits(&a.2), bits(&b.2), "forward, shape {shape:?}");
         }
     }
 }

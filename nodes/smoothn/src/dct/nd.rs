@@ -99,6 +99,23 @@ impl DctN {
     /// If a slice length differs from [`Self::len`] or the scratch belongs to another plan.
     pub fn forward(&self, input: &[f64], output: &mut [f64], s: &mut DctNScratch) {
         assert!(input.len() == self.len && output.len() == self.len, "DctN::forward: wrong slice length");
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports AVX2 (checked at run time).
+            return unsafe { self.forward_avx2(input, output, s) };
+        }
+        self.forward_body(input, output, s);
+    }
+
+    /// [`Self::forward`] compiled for AVX2 (same operations, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn forward_avx2(&self, input: &[f64], output: &mut [f64], s: &mut DctNScratch) {
+        self.forward_body(input, output, s);
+    }
+
+    #[inline(always)]
+    fn forward_body(&self, input: &[f64], output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
         let DctNScratch { line, tmp } = s;
         if k == 0 {
@@ -138,6 +155,23 @@ impl DctN {
     pub fn inverse_weighted(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
         assert!(input.len() == self.len && output.len() == self.len, "DctN::inverse: wrong slice length");
         assert!(weight.is_none_or(|w| w.len() == self.len), "DctN::inverse: wrong weight length");
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports AVX2 (checked at run time).
+            return unsafe { self.inverse_avx2(input, weight, output, s) };
+        }
+        self.inverse_body(input, weight, output, s);
+    }
+
+    /// [`Self::inverse_weighted`] compiled for AVX2 (same operations, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn inverse_avx2(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
+        self.inverse_body(input, weight, output, s);
+    }
+
+    #[inline(always)]
+    fn inverse_body(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
         match self.plans.len() {
             0 => {
                 for (i, (o, x)) in output.iter_mut().zip(input).enumerate() {
@@ -171,6 +205,39 @@ impl DctN {
             "DctN::weighted_rss: length"
         );
         assert!(weight.is_none_or(|g| g.len() == self.len), "DctN::weighted_rss: wrong weight length");
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports AVX2 (checked at run time).
+            return unsafe { self.rss_avx2(input, weight, y, w, work, s) };
+        }
+        self.rss_body(input, weight, y, w, work, s)
+    }
+
+    /// [`Self::weighted_rss`] compiled for AVX2 (same operations, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn rss_avx2(
+        &self,
+        input: &[f64],
+        weight: Option<&[f64]>,
+        y: &[f64],
+        w: &[f64],
+        work: &mut [f64],
+        s: &mut DctNScratch,
+    ) -> f64 {
+        self.rss_body(input, weight, y, w, work, s)
+    }
+
+    #[inline(always)]
+    fn rss_body(
+        &self,
+        input: &[f64],
+        weight: Option<&[f64]>,
+        y: &[f64],
+        w: &[f64],
+        work: &mut [f64],
+        s: &mut DctNScratch,
+    ) -> f64 {
         match self.plans.len() {
             0 => (0..self.len).map(|i| w[i] * (y[i] - weight.map_or(input[i], |g| g[i] * input[i])).powi(2)).sum(),
             1 => self.plans[0].rows_rss(input, weight, y, w, &mut s.line),
@@ -183,6 +250,7 @@ impl DctN {
 
     /// Every inverse pass but the last (K ≥ 2 axes); the result, with only the last axis still to
     /// invert along its rows, is left in `output`.
+    #[inline(always)]
     fn inverse_all_but_last(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
         let DctNScratch { line, tmp } = s;
@@ -205,7 +273,16 @@ impl DctN {
     }
 }
 
+/// AVX2 available (cached by the standard library). The AVX2 builds run the same IEEE operations in
+/// the same order (no FMA contraction), so results do not depend on the CPU.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
 /// Cache-blocked transpose of `src` (rows × cols, row-major) into `dst` (cols × rows).
+#[inline(always)]
 fn transpose(src: &[f64], dst: &mut [f64], rows: usize, cols: usize) {
     for r0 in (0..rows).step_by(TILE) {
         let r1 = (r0 + TILE).min(rows);
