@@ -387,6 +387,9 @@ pub struct PacketResult {
     pub vector: (VectorFieldHeaderV1, Vec<f32>),
 }
 
+/// (tx angle, rx angle, grid x0/z0/dx/dz, nx, nz), as bits.
+type ProjectionKey = (u64, u64, [u64; 4], u32, u32);
+
 /// What the Doppler node does per packet, without IPC.
 pub struct DopplerNode {
     params: DopplerNodeParams,
@@ -396,7 +399,7 @@ pub struct DopplerNode {
     map: DopplerMap,
     vec: BfVectorField,
     /// Per-pixel projections per (tx, rx, grid) when `aperture` is set.
-    projections: BTreeMap<(u64, u64, [u64; 4], u32, u32), Vec<[f32; 2]>>,
+    projections: BTreeMap<ProjectionKey, Vec<[f32; 2]>>,
 }
 
 impl DopplerNode {
@@ -540,9 +543,8 @@ impl DopplerNode {
             let grid = Grid { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as usize, nz: g.nz as usize };
             for (tx, rx) in &angles {
                 let key = (tx.to_bits(), rx.to_bits(), [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits), g.nx, g.nz);
-                if !self.projections.contains_key(&key) {
-                    let pr = aperture_projection(a, first.fc, first.c, *tx, *rx, &grid)?;
-                    self.projections.insert(key, pr);
+                if let std::collections::btree_map::Entry::Vacant(e) = self.projections.entry(key) {
+                    e.insert(aperture_projection(a, first.fc, first.c, *tx, *rx, &grid)?);
                 }
             }
         }
