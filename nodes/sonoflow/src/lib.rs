@@ -16,6 +16,7 @@ pub mod nodeutil;
 pub mod npy;
 pub mod report;
 pub mod run;
+pub mod tool_beamform;
 pub mod tool_simus;
 pub mod tool_smoothn;
 pub mod tools;

@@ -55,6 +55,12 @@ enum Cmd {
     Simus(sonoflow::tool_simus::SimusArgs),
     /// Smoothn batch tool: robust unsupervised smoothing of a (components, ny, nx) or (ny, nx) .npy field.
     Smoothn(sonoflow::tool_smoothn::SmoothnArgs),
+    /// RF → I/Q batch tool: (n_samples, n_elements) RF .npy + MUST parameters → complex64 I/Q .npy.
+    Rf2iq(sonoflow::tool_beamform::Rf2IqArgs),
+    /// Delay-and-sum batch tool: (n_samples, n_elements) I/Q .npy → complex64 (nz, nx) image .npy.
+    Das(sonoflow::tool_beamform::DasArgs),
+    /// Colour Doppler batch tool: (nz, nx, n_frames) packet .npy → velocity, power, variance, flags .npy.
+    Doppler(sonoflow::tool_beamform::DopplerArgs),
     /// Benchmarks (write a Markdown table).
     Bench {
         #[command(subcommand)]
@@ -144,6 +150,9 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         }
         Cmd::Simus(a) => sonoflow::tool_simus::run(&a),
         Cmd::Smoothn(a) => sonoflow::tool_smoothn::run(&a),
+        Cmd::Rf2iq(a) => sonoflow::tool_beamform::run_rf2iq(&a),
+        Cmd::Das(a) => sonoflow::tool_beamform::run_das(&a),
+        Cmd::Doppler(a) => sonoflow::tool_beamform::run_doppler(&a),
         Cmd::Bench { what } => sonoflow::bench::run(what),
         Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }
