@@ -69,6 +69,16 @@ pub struct MustParam {
     /// Element height (m): ignored in 2-D.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height: Option<f64>,
+    /// Receive f-number (MUST `fnumber`, used by `dasmtx`): not used by SIMUS, accepted so that
+    /// one MUST param file serves `sonoflow simus`, `das` and `doppler`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fnumber: Option<f64>,
+    /// Pulse repetition frequency (Hz) (MUST `PRF`, used by `iq2doppler`): not used by SIMUS.
+    #[serde(default, alias = "PRF", skip_serializing_if = "Option::is_none")]
+    pub prf: Option<f64>,
+    /// Receive steering angle (rad) (MUST `RXangle`, used by `dasmtx`): not used by SIMUS.
+    #[serde(default, alias = "RXangle", skip_serializing_if = "Option::is_none")]
+    pub rx_angle: Option<f64>,
 }
 
 /// The pieces of a [`MustParam`].
