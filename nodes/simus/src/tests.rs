@@ -79,7 +79,8 @@ fn must_param_splits_into_parts() {
     assert_eq!(tx.weight(2), 0.5);
     // One MUST param file for SIMUS, DAS and Doppler: fnumber, PRF, RXangle are accepted (unused
     // by SIMUS); anything else unknown is still an error.
-    let j = r#"{"fc": 5e6, "pitch": 3e-4, "kerf": 3.5e-5, "Nelements": 3, "fnumber": 1.5, "PRF": 1e4, "RXangle": 0.26}"#;
+    let j =
+        r#"{"fc": 5e6, "pitch": 3e-4, "kerf": 3.5e-5, "Nelements": 3, "fnumber": 1.5, "PRF": 1e4, "RXangle": 0.26}"#;
     let p = serde_json::from_str::<MustParam>(j).unwrap();
     assert_eq!((p.fnumber, p.prf, p.rx_angle), (Some(1.5), Some(1e4), Some(0.26)));
     assert!(p.into_parts().is_ok());
