@@ -126,6 +126,19 @@ static KINDS: &[KindSpec] = &[
         run: crate::node_regularise::run,
     },
     KindSpec {
+        name: "evaluator",
+        about: "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md and the run report",
+        ports: &[
+            port("truth", In, VectorFieldV1, true),
+            port("raw", In, VectorFieldV1, false),
+            port("regularised", In, VectorFieldV1, false),
+        ],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_evaluate::validate,
+        run: crate::node_evaluate::run,
+    },
+    KindSpec {
         name: "recorder",
         about: "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
         ports: &[],

@@ -3,9 +3,11 @@
 //! Algorithms live in library crates; this crate wires them to the node kit.
 
 pub mod bench;
+pub mod evaluate;
 pub mod kinds;
 pub mod launch;
 pub mod node_beamform;
+pub mod node_evaluate;
 pub mod node_flow;
 pub mod node_recorder;
 pub mod node_regularise;

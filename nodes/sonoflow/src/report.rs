@@ -1,5 +1,6 @@
 //! The run report: `report.json` (machine-readable) and `report.md` (human), written at the end
-//! of every run. The evaluator issue extends it with errors against ground truth.
+//! of every run; with an `evaluator` node in the graph, report.md also holds the errors against
+//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it).
 
 use crate::run::RunReport;
 use std::fmt::Write as _;
@@ -8,7 +9,13 @@ use std::path::Path;
 /// Writes `report.json` and `report.md` into `dir` (atomically).
 pub fn write(dir: &Path, r: &RunReport) -> anyhow::Result<()> {
     crate::nodeutil::write_atomic(&dir.join("report.json"), serde_json::to_string_pretty(r)?.as_bytes())?;
-    crate::nodeutil::write_atomic(&dir.join("report.md"), markdown(r).as_bytes())?;
+    let mut md = markdown(r);
+    // The evaluator's errors against ground truth, beside the stage times.
+    if let Ok(e) = std::fs::read_to_string(dir.join("evaluation.md")) {
+        md.push('\n');
+        md.push_str(&e);
+    }
+    crate::nodeutil::write_atomic(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
 }
 

@@ -418,6 +418,25 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         assert!(e_raw < 0.35 * v_rms, "{estimator}: raw error {e_raw} vs |v| {v_rms}");
         assert!(e_reg < e_raw, "{estimator}: regularised {e_reg} vs raw {e_raw}");
         assert!((m[1] / m[3] - 1.0).abs() < 0.08, "{estimator}: mean vz {} vs truth {}", m[1], m[3]);
+        // The evaluator node saw the same fields live: its figures are those recomputed from the
+        // recording, and they are in the run report beside the stage times.
+        let ev: sonoflow::node_evaluate::Evaluation =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("evaluation.json")).unwrap()).unwrap();
+        assert_eq!(ev.packets.len(), 1);
+        let n = nx * nz;
+        for (name, est) in [("raw", &rv), ("regularised", &gv)] {
+            let flags = if name == "raw" { Some(&est[2 * n..3 * n]) } else { None };
+            let expect = sonoflow::evaluate::field_error(
+                (&tv[..n], &tv[n..2 * n], &tv[2 * n..3 * n]),
+                (&est[..n], &est[n..2 * n], flags),
+                nx,
+                nz,
+                2,
+            );
+            assert_eq!(ev.packets[0].fields[name], expect, "{name}");
+        }
+        let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+        assert!(report.contains("## Error against ground truth") && report.contains("| 0 | regularised |"), "{report}");
         assert!((m[0] / m[2] - 1.0).abs() < 0.2, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
     }
 }
