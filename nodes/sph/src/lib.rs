@@ -1,0 +1,32 @@
+//! Two-dimensional weakly compressible SPH (WCSPH) solver of
+//! S. Shahriari and D. Garcia, "Meshfree simulations of ultrasound vector flow imaging using
+//! smoothed particle hydrodynamics", *Phys. Med. Biol.* 63 (2018) 205011, §2.1–2.2 (eq 1–13).
+//! No IPC: this crate works on slices and owns no process.
+//!
+//! * [`kernel`]: quartic spline (the paper's), Wendland C2 and cubic spline, 2D-normalised (eq 2).
+//! * [`particles`]: struct-of-arrays state (x, z, vx, vz, ρ, m, kind, id).
+//! * [`neighbours`]: cell list rebuilt every evaluation, optional periodic x.
+//! * [`wcsph`]: continuity (eq 7), EOS (eq 8, optional background pressure), pressure term (eq 10),
+//!   mean-value viscous term (eq 12, constant from the kernel's second moment) or Morris et al.
+//!   (1997), body force, fixed wall particles of type I (on the wall) and type II (outside).
+//! * [`solver`]: second-order predictor–corrector, adaptive dt (CFL, viscous, force), outputs at
+//!   exact times, blow-up detection naming time, particle and criterion.
+//! * [`setup`], [`analytic`]: plane-channel lattice and Morris et al. (1997) series solutions.
+
+pub mod analytic;
+pub mod kernel;
+pub mod neighbours;
+pub mod params;
+pub mod particles;
+pub mod setup;
+pub mod solver;
+pub mod wcsph;
+
+/// Floating-point type of the solver (f64: long accumulations of small increments).
+pub type Real = f64;
+
+pub use kernel::{Kernel, KernelKind};
+pub use neighbours::{CellList, PeriodicX};
+pub use params::{ParamError, SphParams, ViscousConstant, ViscousTerm};
+pub use particles::{ParticleKind, Particles};
+pub use solver::{BlowUpCriterion, DtCriterion, Solver, SphError, StepReport};
