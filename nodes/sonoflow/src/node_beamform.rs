@@ -290,6 +290,12 @@ pub struct ApertureParams {
     pub n_elements: usize,
     /// Receive f-number (> 0), as in the beamformer.
     pub fnumber: f64,
+    /// Element width (m, ≤ pitch). When given, each element's direction is weighted by the
+    /// amplitude it receives from the pixel — directivity `sinc(π·width·sin θ/λ)`, soft-baffle
+    /// obliquity `cos θ` and 2-D spreading `r^−½` at fc — because the phase of the summed echo,
+    /// hence the Doppler shift, follows the strong (near-normal) elements. Absent: equal weights.
+    #[serde(default)]
+    pub width: Option<f64>,
 }
 
 impl Default for DopplerNodeParams {
@@ -339,9 +345,10 @@ pub fn validate_doppler(v: &serde_json::Value) -> Result<(), String> {
 }
 
 /// Per-pixel Doppler projection vectors of a plane-wave transmit at `tx` and receive angle `rx`
-/// (rad) through the aperture `a`: `a = −(c/2)∇τ` averaged over the elements the beamformer sums
-/// at each pixel ([`DasPlan::projection`]). The plan is built with a sampling long enough that
-/// no element is dropped for lack of samples.
+/// (rad) through the aperture `a`: `a = −(sin θt + ⟨sin θe⟩, cos θt + ⟨cos θe⟩)/2`, the receive
+/// direction averaged over the elements the beamformer sums at the pixel (the DAS aperture rule
+/// of `sonoflow-beamform`: centred on the line through the pixel at `rx`, width `z/(F cos rx)`,
+/// clipped by the array), with equal weights or, given `width`, the received amplitudes.
 pub fn aperture_projection(
     a: &ApertureParams,
     fc: f64,
@@ -350,27 +357,64 @@ pub fn aperture_projection(
     rx: f64,
     grid: &Grid,
 ) -> anyhow::Result<Vec<[f32; 2]>> {
-    if !(a.fnumber.is_finite() && a.fnumber > 0.0) {
-        anyhow::bail!("fnumber = {} is out of range: > 0", a.fnumber);
+    if !(a.fnumber.is_finite() && a.fnumber > 0.0 && a.fnumber <= 1000.0) {
+        anyhow::bail!("fnumber = {} is out of range: (0, 1000]", a.fnumber);
     }
-    let fs = 4.0 * fc;
-    let width = a.pitch * a.n_elements as f64;
-    let z_max = grid.z0 + grid.dz * grid.nz as f64;
-    let x_span = grid.x0.abs().max((grid.x0 + grid.dx * grid.nx as f64).abs()) + width;
-    let longest = 2.0 * (z_max.hypot(x_span) + width) / c;
-    let n_samples = ((longest * fs).ceil() as usize + 16).min(1 << 22);
-    let dp = DasParams {
-        fc,
-        c,
-        fs,
-        t0: 0.0,
-        pitch: a.pitch,
-        n_elements: a.n_elements,
-        fnumber: a.fnumber,
-        rx_angle: rx,
-        interpolation: Interpolation::Linear,
-    };
-    Ok(DasPlan::new(&dp, &TxWave::PlaneWave { tilt: tx }, grid, n_samples)?.projection())
+    if !(a.pitch.is_finite() && a.pitch > 0.0 && a.pitch < 0.1) {
+        anyhow::bail!("pitch = {} is out of range: (0, 0.1) m", a.pitch);
+    }
+    if !(1..=65536).contains(&a.n_elements) {
+        anyhow::bail!("n_elements = {} is out of range: 1 ..= 65536", a.n_elements);
+    }
+    if let Some(w) = a.width {
+        if !(w.is_finite() && w > 0.0 && w <= a.pitch) {
+            anyhow::bail!("width = {w} is out of range: (0, pitch = {}] m", a.pitch);
+        }
+    }
+    if !(fc.is_finite() && fc > 0.0 && c.is_finite() && c > 0.0) {
+        anyhow::bail!("fc = {fc} and c = {c} must be finite and > 0");
+    }
+    let lambda = c / fc;
+    let xe: Vec<f64> = (0..a.n_elements).map(|e| (e as f64 - (a.n_elements as f64 - 1.0) / 2.0) * a.pitch).collect();
+    let (tan_rx, cos_rx) = (rx.tan(), rx.cos());
+    let mut out = Vec::with_capacity(grid.nx * grid.nz);
+    for iz in 0..grid.nz {
+        let z = grid.z(iz);
+        for ix in 0..grid.nx {
+            let x = grid.x(ix);
+            let (mut sw, mut ss, mut sc) = (0.0f64, 0.0f64, 0.0f64);
+            for &e in &xe {
+                let dx = x - e;
+                let inside = if rx == 0.0 {
+                    dx.abs() <= z / 2.0 / a.fnumber
+                } else {
+                    (dx - z * tan_rx).abs() <= z / cos_rx / 2.0 / a.fnumber
+                };
+                let r = dx.hypot(z);
+                if !inside || r <= 0.0 {
+                    continue;
+                }
+                let (sin_t, cos_t) = (dx / r, z / r);
+                let w = match a.width {
+                    None => 1.0,
+                    Some(width) => {
+                        let u = std::f64::consts::PI * width * sin_t / lambda;
+                        let sinc = if u.abs() < 1e-12 { 1.0 } else { u.sin() / u };
+                        (sinc * cos_t).abs() / r.sqrt()
+                    }
+                };
+                sw += w;
+                ss += w * sin_t;
+                sc += w * cos_t;
+            }
+            out.push(if sw > 0.0 {
+                [(-(tx.sin() + ss / sw) / 2.0) as f32, (-(tx.cos() + sc / sw) / 2.0) as f32]
+            } else {
+                [0.0, 0.0]
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// One packet's frames of one (tx angle, rx angle) pair.
@@ -668,7 +712,7 @@ mod tests {
 
     #[test]
     fn aperture_projection_is_nominal_inside_the_array_and_clipped_at_its_edge() {
-        let a = ApertureParams { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5 };
+        let a = ApertureParams { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5, width: None };
         // Two pixels at 20 mm depth: x = 0 (both ±15° sub-apertures inside the 38 mm array) and
         // x = 12 mm (the −15° sub-aperture, centred at x + 5.4 mm, is clipped by the edge at 19 mm).
         let grid = Grid { x0: 0.0, z0: 0.02, dx: 12e-3, dz: 1e-3, nx: 2, nz: 1 };
@@ -679,7 +723,31 @@ mod tests {
         assert!((p[0][0] as f64 - nom[0]).abs() < 0.01 && (p[0][1] as f64 - nom[1]).abs() < 0.01, "{p:?} vs {nom:?}");
         // Edge: fewer oblique elements, so the lateral sensitivity |a_x| shrinks.
         assert!((p[1][0] as f64).abs() < 0.9 * nom[0].abs(), "{p:?} vs {nom:?}");
-        assert!(aperture_projection(&ApertureParams { fnumber: 0.0, ..a }, 5e6, 1540.0, 0.0, rx, &grid).is_err());
+        assert!(
+            aperture_projection(&ApertureParams { fnumber: 0.0, ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).is_err()
+        );
+        // Same aperture rule as the beamformer's DAS plan: its mean delay gradient gives the same
+        // equal-weight projection (float32 gradients: 1e-4).
+        let dp = DasParams {
+            fc: 5e6,
+            c: 1540.0,
+            fs: 20e6,
+            t0: 0.0,
+            pitch: a.pitch,
+            n_elements: a.n_elements,
+            fnumber: a.fnumber,
+            rx_angle: rx,
+            interpolation: Interpolation::Linear,
+        };
+        let plan = DasPlan::new(&dp, &TxWave::PlaneWave { tilt: 0.0 }, &grid, 4000).unwrap().projection();
+        for (q, r) in p.iter().zip(&plan) {
+            assert!((q[0] - r[0]).abs() < 1e-4 && (q[1] - r[1]).abs() < 1e-4, "{p:?} vs {plan:?}");
+        }
+        // Amplitude weights (element width 0.265 mm at 5 MHz): the oblique elements of the −15°
+        // sub-aperture receive less, so the effective receive angle and |a_x| are smaller.
+        let wp =
+            aperture_projection(&ApertureParams { width: Some(0.265e-3), ..a }, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+        assert!(wp[0][0].abs() < 0.95 * p[0][0].abs() && wp[0][0].abs() > 0.5 * p[0][0].abs(), "{wp:?} vs {p:?}");
     }
 
     #[test]

@@ -407,13 +407,13 @@ fn quickstart_chain_measures_the_vessel_velocity() {
             gh.smoothing_s, m[0], m[1], m[2], m[3]
         );
         // Measured (one packet of 32 frames, no spatial window, 1547 pixels ≥ 2 px inside the
-        // lumen, per-pixel aperture projections): raw RMS error 0.108–0.112 m/s for |v| 0.41 m/s,
-        // regularised 0.083–0.085; mean vz within 3 % of the truth, mean vx 10–13 % low (the
-        // lateral component is the difference of the two sub-aperture Doppler values divided by
-        // sin 15°, so a 1 cm/s bias between them is 4 cm/s in vx; nominal projections: 17–19 %
-        // low; see the closing note of issue 4). The bounds below leave room for
-        // speckle (about 50 independent resolution cells: ±4 % on the means) without accepting
-        // a sign error or a wrong projection (either would give ≥ 100 % errors).
+        // lumen, projections weighted by the elements' received amplitudes): raw RMS error
+        // 0.109–0.118 m/s for |v| 0.41 m/s, regularised 0.079–0.083; mean vz within 3 % of the
+        // truth, mean vx within 1.5 % (with equal-weight projections 10–13 % low, with nominal
+        // ones 17–19 %: vx is the difference of the two sub-aperture Doppler values divided by
+        // the sine of the effective receive angle). The bounds below leave room for speckle
+        // (about 50 independent resolution cells: ±4 % on the means) without accepting a sign
+        // error or a wrong projection.
         assert!(cnt > 1000);
         assert!(e_raw < 0.35 * v_rms, "{estimator}: raw error {e_raw} vs |v| {v_rms}");
         assert!(e_reg < e_raw, "{estimator}: regularised {e_reg} vs raw {e_raw}");
@@ -437,7 +437,7 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         }
         let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
         assert!(report.contains("## Error against ground truth") && report.contains("| 0 | regularised |"), "{report}");
-        assert!((m[0] / m[2] - 1.0).abs() < 0.2, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
+        assert!((m[0] / m[2] - 1.0).abs() < 0.06, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
     }
 }
 
@@ -488,4 +488,62 @@ fn external_doppler_estimator_swaps_in_and_agrees_with_the_built_in() {
     }
     assert!(compared > n / 2, "{compared} of {n} pixels estimated");
     assert!(worst < 1e-5, "largest difference {worst} m/s");
+}
+
+/// Solid-body rotation fitted to a field: ω from v = ω (dz, −dx) (rotation in the (x, z) plane
+/// about the centre; the sign is fixed by the truth field) by least squares over the pixels
+/// inside the mask, from vx alone and from vz alone.
+fn fitted_omega(v: &[f32], mask: &[f32], g: &sonoflow_messages::GridV1, xc: f64, zc: f64) -> (f64, f64) {
+    let (nx, nz) = (g.nx as usize, g.nz as usize);
+    let n = nx * nz;
+    let (mut nx_, mut dx_, mut nz_, mut dz_) = (0.0, 0.0, 0.0, 0.0);
+    for iz in 0..nz {
+        for ix in 0..nx {
+            let i = iz * nx + ix;
+            if mask[i] < 0.5 {
+                continue;
+            }
+            let (dx, dz) = (g.x0 + ix as f64 * g.dx - xc, g.z0 + iz as f64 * g.dz - zc);
+            nx_ += v[i] as f64 * dz;
+            dx_ += dz * dz;
+            nz_ -= v[n + i] as f64 * dx;
+            dz_ += dx * dx;
+        }
+    }
+    (nx_ / dx_, nz_ / dz_)
+}
+
+/// The rotating disk through the whole chain: the estimated field is a solid-body rotation with
+/// the true angular velocity, and the evaluator's errors improve with regularisation.
+#[test]
+fn rotating_disk_rotation_rate_is_recovered() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_graph("launch/rotating-disk.toml", dir.path(), &["--set", "flow.schedule.n_packets=1"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let rec = dir.path().join("recording.mcap");
+    let (th, tv) = cdr::decode::<VectorField>(&read_topic(&rec, "truth")[0]).unwrap();
+    let (_, rv) = cdr::decode::<VectorField>(&read_topic(&rec, "vector")[0]).unwrap();
+    let (_, gv) = cdr::decode::<VectorField>(&read_topic(&rec, "regularised")[0]).unwrap();
+    let n = (th.grid.nx * th.grid.nz) as usize;
+    let mask = &tv[2 * n..3 * n];
+    let (wx_true, wz_true) = fitted_omega(&tv, mask, &th.grid, 0.0, 0.02);
+    assert!((wx_true.abs() - 50.0).abs() < 0.5 && (wz_true / wx_true - 1.0).abs() < 1e-3, "truth: 50 rad/s rotation");
+    let w = wx_true;
+    let (raw_x, raw_z) = fitted_omega(&rv, mask, &th.grid, 0.0, 0.02);
+    let (reg_x, reg_z) = fitted_omega(&gv, mask, &th.grid, 0.0, 0.02);
+    println!("omega: truth {w:.2}; from vx: raw {raw_x:.2}, regularised {reg_x:.2}; from vz: raw {raw_z:.2}, regularised {reg_z:.2} rad/s");
+    // Measured: from vz 3.5 % low, from vx 10 % low (21 % with equal-weight projections: the
+    // disk's strong shear inside each sub-aperture's point-spread function adds to the lateral
+    // bias). Bounds leave room for speckle and catch a wrong projection or sign (≥ 100 % errors).
+    for wz in [raw_z, reg_z] {
+        assert!((wz / w - 1.0).abs() < 0.05, "ω from vz {wz} vs {w}");
+    }
+    for wx in [raw_x, reg_x] {
+        assert!((wx / w - 1.0).abs() < 0.2, "ω from vx {wx} vs {w}");
+    }
+    let ev: sonoflow::node_evaluate::Evaluation =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("evaluation.json")).unwrap()).unwrap();
+    let (raw, reg) = (&ev.packets[0].fields["raw"], &ev.packets[0].fields["regularised"]);
+    assert!(reg.x.abs_p75 < raw.x.abs_p75 && reg.z.abs_p75 < raw.z.abs_p75, "{raw:?} {reg:?}");
+    assert!(reg.z.abs_p75 < 0.05, "{reg:?}");
 }
