@@ -21,4 +21,5 @@ pub mod run;
 pub mod tool_beamform;
 pub mod tool_simus;
 pub mod tool_smoothn;
+pub mod tool_sweep;
 pub mod tools;

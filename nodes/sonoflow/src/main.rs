@@ -53,6 +53,8 @@ enum Cmd {
     Clean,
     /// SIMUS batch tool: scatterers + MUST parameters → RF (.npy) and a JSON sidecar.
     Simus(sonoflow::tool_simus::SimusArgs),
+    /// Run a scene over a grid of settings; error (from its evaluator) against run time, Pareto front.
+    Sweep(sonoflow::tool_sweep::SweepArgs),
     /// Smoothn batch tool: robust unsupervised smoothing of a (components, ny, nx) or (ny, nx) .npy field.
     Smoothn(sonoflow::tool_smoothn::SmoothnArgs),
     /// RF → I/Q batch tool: (n_samples, n_elements) RF .npy + MUST parameters → complex64 I/Q .npy.
@@ -150,6 +152,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         }
         Cmd::Simus(a) => sonoflow::tool_simus::run(&a),
         Cmd::Smoothn(a) => sonoflow::tool_smoothn::run(&a),
+        Cmd::Sweep(a) => sonoflow::tool_sweep::run(&a),
         Cmd::Rf2iq(a) => sonoflow::tool_beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow::tool_beamform::run_das(&a),
         Cmd::Doppler(a) => sonoflow::tool_beamform::run_doppler(&a),

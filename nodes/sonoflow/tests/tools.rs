@@ -138,3 +138,52 @@ fn smoothn_tool_rejects_bad_input_with_clear_errors() {
     assert!(err.contains("missing.npy"), "{err}");
     assert!(!out.exists());
 }
+
+/// `sonoflow sweep` runs every combination, and its table holds each run's own evaluation.
+#[test]
+fn sweep_runs_each_point_and_reports_error_against_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(bin())
+        .args(["sweep"])
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
+        .args(["--vary", "flow.density_per_mm2=2,4", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    for (k, row) in rows.iter().enumerate() {
+        let cols: Vec<&str> = row.split(',').collect();
+        assert!(cols[1].contains(&format!("flow.density_per_mm2={}", [2, 4][k])), "{row}");
+        // The error column is the mean over packets of sqrt(rms_x² + rms_z²) from that point's
+        // evaluation.json.
+        let ev: sonoflow::node_evaluate::Evaluation = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join(format!("point-{k:03}/evaluation.json"))).unwrap(),
+        )
+        .unwrap();
+        let f = &ev.packets[0].fields["regularised"];
+        let expect = f.x.rms.hypot(f.z.rms);
+        let got: f64 = cols[5].parse().unwrap();
+        assert!((got - expect).abs() < 1e-12, "{got} vs {expect}");
+        let compute: f64 = cols[3].parse().unwrap();
+        assert!(compute > 0.0);
+    }
+    assert!(rows.iter().any(|r| r.ends_with(",true")), "at least one Pareto point: {csv}");
+    let svg = std::fs::read_to_string(dir.path().join("sweep.svg")).unwrap();
+    assert_eq!(svg.matches("<circle").count(), 2);
+    // A bad value stops the sweep before anything runs.
+    let bad = Command::new(bin())
+        .arg("sweep")
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--vary", "flow.density_per_mm2=2,-1", "--out"])
+        .arg(dir.path().join("bad"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("density_per_mm2=-1"));
+    assert!(!dir.path().join("bad").exists());
+}
