@@ -12,21 +12,29 @@
 //! * [`solver`]: second-order predictor–corrector, adaptive dt (CFL, viscous, force), outputs at
 //!   exact times, blow-up detection naming time, particle and criterion.
 //! * [`setup`], [`analytic`]: plane-channel lattice and Morris et al. (1997) series solutions.
+//! * [`waveform`]: periodic waveforms (Fourier series; the synthetic carotid inlet waveform).
+//! * [`womersley`]: 2D channel Womersley solutions (validation reference and imposed inlet profile).
+//! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
 
 pub mod analytic;
+pub mod boundary;
 pub mod kernel;
 pub mod neighbours;
 pub mod params;
 pub mod particles;
 pub mod setup;
 pub mod solver;
+pub mod waveform;
 pub mod wcsph;
+pub mod womersley;
 
 /// Floating-point type of the solver (f64: long accumulations of small increments).
 pub type Real = f64;
 
+pub use boundary::{BoundaryFlux, OpenBoundary, ProfileKind};
 pub use kernel::{Kernel, KernelKind};
 pub use neighbours::{CellList, PeriodicX};
 pub use params::{ParamError, SphParams, ViscousConstant, ViscousTerm};
 pub use particles::{ParticleKind, Particles};
 pub use solver::{BlowUpCriterion, DtCriterion, Solver, SphError, StepReport};
+pub use waveform::{Waveform, WaveformSpec};

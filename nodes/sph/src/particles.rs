@@ -17,18 +17,28 @@ pub enum ParticleKind {
     /// (u = 2 u_wall − ũ, ũ the Shepard mean of the fluid velocity at the particle); pressure as type I
     /// (zero normal gradient, plus the body-force hydrostatic term).
     WallOutside,
+    /// Particle in an open-boundary reservoir ([`crate::boundary`]): prescribed velocity, density
+    /// from the continuity equation; `group` is the index of its boundary.
+    Buffer,
 }
 
 impl ParticleKind {
     /// True for fixed virtual (wall) particles.
     #[inline]
     pub fn is_wall(self) -> bool {
-        !matches!(self, ParticleKind::Fluid)
+        matches!(self, ParticleKind::WallOn | ParticleKind::WallOutside)
+    }
+
+    /// True for free fluid particles (not walls, not reservoir particles).
+    #[inline]
+    pub fn is_fluid(self) -> bool {
+        matches!(self, ParticleKind::Fluid)
     }
 }
 
 /// All particles, struct of arrays. For wall particles `vx`, `vz` hold the prescribed wall velocity
-/// (moving walls keep their positions: they model walls that slide along themselves).
+/// (walls without a wall motion keep their positions: a velocity then models a wall
+/// that slides along itself).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Particles {
     /// Lateral position x \[m\].
@@ -45,8 +55,11 @@ pub struct Particles {
     pub mass: Vec<Real>,
     /// Particle role.
     pub kind: Vec<ParticleKind>,
-    /// Stable identifier (kept for the particle's life).
+    /// Stable identifier (kept for the particle's life, never reused).
     pub id: Vec<u64>,
+    /// Group: for [`ParticleKind::Buffer`] the index of its open boundary; for walls the index of
+    /// its wall motion + 1 (0 = fixed wall); 0 for fluid.
+    pub group: Vec<u16>,
 }
 
 impl Particles {
@@ -63,6 +76,23 @@ impl Particles {
     /// Appends one particle.
     #[allow(clippy::too_many_arguments)]
     pub fn push(&mut self, x: Real, z: Real, vx: Real, vz: Real, rho: Real, mass: Real, kind: ParticleKind, id: u64) {
+        self.push_grouped(x, z, vx, vz, rho, mass, kind, id, 0);
+    }
+
+    /// Appends one particle with its group (see [`Particles::group`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn push_grouped(
+        &mut self,
+        x: Real,
+        z: Real,
+        vx: Real,
+        vz: Real,
+        rho: Real,
+        mass: Real,
+        kind: ParticleKind,
+        id: u64,
+        group: u16,
+    ) {
         self.x.push(x);
         self.z.push(z);
         self.vx.push(vx);
@@ -71,6 +101,48 @@ impl Particles {
         self.mass.push(mass);
         self.kind.push(kind);
         self.id.push(id);
+        self.group.push(group);
+    }
+
+    /// Appends all particles of `other`.
+    pub fn append(&mut self, other: &Particles) {
+        self.x.extend_from_slice(&other.x);
+        self.z.extend_from_slice(&other.z);
+        self.vx.extend_from_slice(&other.vx);
+        self.vz.extend_from_slice(&other.vz);
+        self.rho.extend_from_slice(&other.rho);
+        self.mass.extend_from_slice(&other.mass);
+        self.kind.extend_from_slice(&other.kind);
+        self.id.extend_from_slice(&other.id);
+        self.group.extend_from_slice(&other.group);
+    }
+
+    /// Keeps the particles for which `keep(i)` is true, in their order.
+    pub fn retain_indices(&mut self, keep: &[bool]) {
+        fn filt<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut j = 0;
+            for i in 0..v.len() {
+                if keep[i] {
+                    v[j] = v[i];
+                    j += 1;
+                }
+            }
+            v.truncate(j);
+        }
+        filt(&mut self.x, keep);
+        filt(&mut self.z, keep);
+        filt(&mut self.vx, keep);
+        filt(&mut self.vz, keep);
+        filt(&mut self.rho, keep);
+        filt(&mut self.mass, keep);
+        filt(&mut self.kind, keep);
+        filt(&mut self.id, keep);
+        filt(&mut self.group, keep);
+    }
+
+    /// Largest id + 1 (0 when empty): the next id that is certainly unused.
+    pub fn next_free_id(&self) -> u64 {
+        self.id.iter().max().map_or(0, |m| m + 1)
     }
 
     /// Length of each array if they all agree, `None` otherwise.
@@ -84,12 +156,13 @@ impl Particles {
             self.mass.len(),
             self.kind.len(),
             self.id.len(),
+            self.group.len(),
         ];
         all.iter().all(|&l| l == n).then_some(n)
     }
 
-    /// Number of fluid particles.
+    /// Number of free fluid particles.
     pub fn fluid_count(&self) -> usize {
-        self.kind.iter().filter(|k| !k.is_wall()).count()
+        self.kind.iter().filter(|k| k.is_fluid()).count()
     }
 }
