@@ -5,7 +5,7 @@
 
 use sonoflow_sph::analytic::poiseuille;
 use sonoflow_sph::setup::ChannelConfig;
-use sonoflow_sph::{PeriodicX, Real, Solver, SphParams};
+use sonoflow_sph::{Period, Real, Solver, SphParams};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             c,
             mu: nu * rho0,
             body_force: [f, 0.0],
-            periodic_x: Some(PeriodicX { x_min: 0.0, length: cfg.length() }),
+            periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
             dt_max: 1.0,
             ..Default::default()
         };

@@ -213,6 +213,138 @@ impl OpenBoundary {
     }
 }
 
+/// Runtime state of one open boundary inside the solver: its description, the imposed-profile
+/// table and the mass bookkeeping.
+#[derive(Clone, Debug)]
+pub struct BoundaryState {
+    /// The boundary.
+    pub spec: OpenBoundary,
+    /// Mass through the opening and particles created/removed since the start.
+    pub flux: BoundaryFlux,
+    table: ProfileTable,
+    ramp: Real,
+}
+
+impl BoundaryState {
+    /// Runtime state for viscosity ν.
+    pub fn new(spec: OpenBoundary, nu: Real) -> Self {
+        let table = spec.profile_table(nu);
+        BoundaryState { spec, flux: BoundaryFlux::default(), table, ramp: 1.0 }
+    }
+
+    /// Evaluates the imposed profile at time t.
+    pub fn set_time(&mut self, t: Real) {
+        self.table.set_time(t);
+        self.ramp = ramp(t, self.spec.ramp_time);
+    }
+
+    /// Imposed velocity at lateral position y at the time last set.
+    #[inline]
+    pub fn velocity_at(&self, y: Real) -> [Real; 2] {
+        self.spec.velocity(&self.table, y, self.ramp)
+    }
+}
+
+/// Sets every reservoir particle's velocity to its boundary's imposed profile at time t.
+pub fn impose(states: &mut [BoundaryState], p: &mut Particles, t: Real) {
+    if states.is_empty() {
+        return;
+    }
+    for s in states.iter_mut() {
+        s.set_time(t);
+    }
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Buffer {
+            let b = &states[p.group[i] as usize];
+            let (_, y) = b.spec.local(p.x[i], p.z[i]);
+            let v = b.velocity_at(y);
+            p.vx[i] = v[0];
+            p.vz[i] = v[1];
+        }
+    }
+}
+
+/// After a step ending at time t (profiles already set to t by [`impose`]): moves particles between
+/// the fluid and the reservoirs, removes reservoir particles beyond the far side and creates new ones
+/// at the far side of every lane that has room (module documentation). New particles get ids from
+/// `next_id` upwards, mass ρ₀dx², the density of the lane's outermost particle and the imposed
+/// velocity. `keep` is scratch space.
+pub fn exchange(states: &mut [BoundaryState], p: &mut Particles, rho0: Real, next_id: &mut u64, keep: &mut Vec<bool>) {
+    if states.is_empty() {
+        return;
+    }
+    keep.clear();
+    keep.resize(p.len(), true);
+    let mut any_removed = false;
+    for i in 0..p.len() {
+        match p.kind[i] {
+            ParticleKind::Fluid => {
+                for (g, b) in states.iter_mut().enumerate() {
+                    let (s, y) = b.spec.local(p.x[i], p.z[i]);
+                    if s > 0.0 && s <= b.spec.depth && y.abs() <= b.spec.half_width + 0.5 * b.spec.dx {
+                        p.kind[i] = ParticleKind::Buffer;
+                        p.group[i] = g as u16;
+                        b.flux.mass_out += p.mass[i];
+                        let v = b.velocity_at(y);
+                        p.vx[i] = v[0];
+                        p.vz[i] = v[1];
+                        break;
+                    }
+                }
+            }
+            ParticleKind::Buffer => {
+                let b = &mut states[p.group[i] as usize];
+                let (s, _) = b.spec.local(p.x[i], p.z[i]);
+                if s <= 0.0 {
+                    p.kind[i] = ParticleKind::Fluid;
+                    p.group[i] = 0;
+                    b.flux.mass_in += p.mass[i];
+                } else if s > b.spec.depth {
+                    keep[i] = false;
+                    any_removed = true;
+                    b.flux.removed += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    if any_removed {
+        p.retain_indices(keep);
+    }
+    // Creation at the far side, lane by lane.
+    let mut created = Particles::default();
+    for (g, b) in states.iter_mut().enumerate() {
+        let n = b.spec.n_lanes();
+        let (dy, ds, a) = (b.spec.lane_spacing(), b.spec.stream_spacing(), b.spec.half_width);
+        // per lane: outermost s and its density
+        let mut outer: Vec<(Real, Real)> = vec![(-0.5 * ds, rho0); n];
+        for i in 0..p.len() {
+            if p.kind[i] == ParticleKind::Buffer && p.group[i] as usize == g {
+                let (s, y) = b.spec.local(p.x[i], p.z[i]);
+                let j = (((y + a) / dy).floor().max(0.0) as usize).min(n - 1);
+                if s > outer[j].0 {
+                    outer[j] = (s, p.rho[i]);
+                }
+            }
+        }
+        let mass = rho0 * b.spec.dx * b.spec.dx;
+        for (j, &(mut s_out, rho)) in outer.iter().enumerate() {
+            while s_out + ds <= b.spec.depth {
+                s_out += ds;
+                let y = b.spec.lane_y(j);
+                let pos = b.spec.global(s_out, y);
+                let v = b.velocity_at(y);
+                created.push_grouped(pos[0], pos[1], v[0], v[1], rho, mass, ParticleKind::Buffer, *next_id, g as u16);
+                *next_id += 1;
+                b.flux.created += 1;
+            }
+        }
+    }
+    if !created.is_empty() {
+        p.append(&created);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -15,6 +15,7 @@
 //! * [`waveform`]: periodic waveforms (Fourier series; the synthetic carotid inlet waveform).
 //! * [`womersley`]: 2D channel Womersley solutions (validation reference and imposed inlet profile).
 //! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
+//! * [`walls`]: prescribed wall motion and the fluid domain of the anti-penetration guard.
 
 pub mod analytic;
 pub mod boundary;
@@ -24,6 +25,7 @@ pub mod params;
 pub mod particles;
 pub mod setup;
 pub mod solver;
+pub mod walls;
 pub mod waveform;
 pub mod wcsph;
 pub mod womersley;
@@ -33,8 +35,9 @@ pub type Real = f64;
 
 pub use boundary::{BoundaryFlux, OpenBoundary, ProfileKind};
 pub use kernel::{Kernel, KernelKind};
-pub use neighbours::{CellList, PeriodicX};
-pub use params::{ParamError, SphParams, ViscousConstant, ViscousTerm};
+pub use neighbours::{CellList, Period};
+pub use params::{ParamError, PulsatileForce, SphParams, ViscousConstant, ViscousTerm};
 pub use particles::{ParticleKind, Particles};
-pub use solver::{BlowUpCriterion, DtCriterion, Solver, SphError, StepReport};
+pub use solver::{BlowUpCriterion, Diagnostics, DtCriterion, Solver, SphError, StepReport};
+pub use walls::{Domain, WallMotion};
 pub use waveform::{Waveform, WaveformSpec};

@@ -3,71 +3,125 @@
 
 use crate::Real;
 
-/// Periodic boundary along x: positions live in `[x_min, x_min + length)`.
+/// A periodic direction: coordinates live in `[min, min + length)`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PeriodicX {
+pub struct Period {
     /// Lower bound of the periodic interval \[m\].
-    pub x_min: Real,
+    pub min: Real,
     /// Period \[m\]; must hold at least 3 cells of one support radius.
     pub length: Real,
 }
 
-impl PeriodicX {
-    /// Wraps `x` into `[x_min, x_min + length)`.
+impl Period {
+    /// Wraps `v` into `[min, min + length)`.
     #[inline]
-    pub fn wrap(&self, x: Real) -> Real {
-        let mut y = x - self.x_min;
+    pub fn wrap(&self, v: Real) -> Real {
+        let mut y = v - self.min;
         y -= self.length * (y / self.length).floor();
         if y >= self.length {
             y -= self.length;
         }
-        self.x_min + y
+        self.min + y
+    }
+
+    /// Minimum-image difference.
+    #[inline]
+    pub fn image(&self, d: Real) -> Real {
+        d - self.length * (d / self.length).round()
+    }
+}
+
+/// One axis of the cell grid.
+#[derive(Clone, Copy, Debug, Default)]
+struct Axis {
+    origin: Real,
+    cell: Real,
+    n: usize,
+    periodic: Option<Period>,
+}
+
+impl Axis {
+    fn build(v: &[Real], radius: Real, periodic: Option<Period>) -> Axis {
+        match periodic {
+            Some(p) => {
+                let n = ((p.length / radius).floor() as usize).max(1);
+                Axis { origin: p.min, cell: p.length / n as Real, n, periodic }
+            }
+            None => {
+                let (lo, hi) = min_max(v);
+                Axis { origin: lo, cell: radius, n: ((hi - lo) / radius).floor() as usize + 1, periodic: None }
+            }
+        }
+    }
+
+    #[inline]
+    fn coord(&self, v: Real) -> usize {
+        (((v - self.origin) / self.cell).floor().max(0.0) as usize).min(self.n - 1)
+    }
+
+    /// The (up to 3) cells next to cell `i`, `usize::MAX` for none.
+    #[inline]
+    fn around(&self, i: usize) -> [usize; 3] {
+        let mut c = [usize::MAX; 3];
+        match self.periodic {
+            Some(_) if self.n >= 3 => c = [(i + self.n - 1) % self.n, i, (i + 1) % self.n],
+            Some(_) => {
+                for (k, j) in (0..self.n).enumerate() {
+                    c[k] = j;
+                }
+            }
+            None => {
+                if i > 0 {
+                    c[0] = i - 1;
+                }
+                c[1] = i;
+                if i + 1 < self.n {
+                    c[2] = i + 1;
+                }
+            }
+        }
+        c
+    }
+
+    #[inline]
+    fn diff(&self, d: Real) -> Real {
+        match self.periodic {
+            Some(p) => p.image(d),
+            None => d,
+        }
     }
 }
 
 /// Uniform grid of cells holding particle indices.
 #[derive(Clone, Debug, Default)]
 pub struct CellList {
-    x0: Real,
-    z0: Real,
-    cell_x: Real,
-    cell_z: Real,
-    nx: usize,
-    nz: usize,
-    periodic: Option<PeriodicX>,
+    ax: Axis,
+    az: Axis,
     cell_start: Vec<u32>,
     sorted: Vec<u32>,
     cell_of: Vec<u32>,
+    fill: Vec<u32>,
     radius2: Real,
 }
 
 impl CellList {
     /// Rebuilds the grid for positions `x`, `z`, search radius `radius` (> 0) and optional periodic
-    /// x. Reuses its allocations. Panics never; the caller guarantees finite positions and, if
-    /// periodic, `length ≥ 3 radius` (checked by [`crate::SphParams::validate`]).
-    pub fn build(&mut self, x: &[Real], z: &[Real], radius: Real, periodic: Option<PeriodicX>) {
+    /// directions. Reuses its allocations. Never panics; the caller guarantees finite positions and,
+    /// if periodic, `length ≥ 3 radius` (checked by [`crate::SphParams::validate`]).
+    pub fn build(
+        &mut self,
+        x: &[Real],
+        z: &[Real],
+        radius: Real,
+        periodic_x: Option<Period>,
+        periodic_z: Option<Period>,
+    ) {
         let n = x.len();
-        self.periodic = periodic;
         self.radius2 = radius * radius;
-        let (zmin, zmax) = min_max(z);
-        self.z0 = zmin;
-        self.cell_z = radius;
-        self.nz = ((zmax - zmin) / radius).floor() as usize + 1;
-        match periodic {
-            Some(p) => {
-                self.x0 = p.x_min;
-                self.nx = ((p.length / radius).floor() as usize).max(1);
-                self.cell_x = p.length / self.nx as Real;
-            }
-            None => {
-                let (xmin, xmax) = min_max(x);
-                self.x0 = xmin;
-                self.cell_x = radius;
-                self.nx = ((xmax - xmin) / radius).floor() as usize + 1;
-            }
-        }
-        let ncell = self.nx * self.nz;
+        self.ax = Axis::build(x, radius, periodic_x);
+        self.az = Axis::build(z, radius, periodic_z);
+        let ncell = self.ax.n * self.az.n;
         let mut cell_of = std::mem::take(&mut self.cell_of);
         cell_of.clear();
         cell_of.extend(x.iter().zip(z).map(|(&xi, &zi)| self.cell_index(xi, zi) as u32));
@@ -82,24 +136,22 @@ impl CellList {
         }
         self.sorted.clear();
         self.sorted.resize(n, 0);
-        let mut fill: Vec<u32> = self.cell_start[..ncell].to_vec();
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.cell_start[..ncell]);
         for (i, &c) in self.cell_of.iter().enumerate() {
-            self.sorted[fill[c as usize] as usize] = i as u32;
-            fill[c as usize] += 1;
+            self.sorted[self.fill[c as usize] as usize] = i as u32;
+            self.fill[c as usize] += 1;
         }
     }
 
     #[inline]
-    fn cell_coords(&self, x: Real, z: Real) -> (usize, usize) {
-        let ix = (((x - self.x0) / self.cell_x).floor().max(0.0) as usize).min(self.nx - 1);
-        let iz = (((z - self.z0) / self.cell_z).floor().max(0.0) as usize).min(self.nz - 1);
-        (ix, iz)
+    fn cell_index(&self, x: Real, z: Real) -> usize {
+        self.az.coord(z) * self.ax.n + self.ax.coord(x)
     }
 
-    #[inline]
-    fn cell_index(&self, x: Real, z: Real) -> usize {
-        let (ix, iz) = self.cell_coords(x, z);
-        iz * self.nx + ix
+    /// Particle indices sorted by cell (row-major cells, stable within a cell).
+    pub fn sorted_indices(&self) -> &[u32] {
+        &self.sorted
     }
 
     /// Calls `f(b, dx, dz, r²)` for every particle b (including a itself) with
@@ -114,42 +166,22 @@ impl CellList {
         z: &[Real],
         mut f: F,
     ) {
-        let (ix, iz) = self.cell_coords(xa, za);
-        let izs = iz.saturating_sub(1)..=(iz + 1).min(self.nz - 1);
-        for jz in izs {
-            let mut cols = [usize::MAX; 3];
-            match self.periodic {
-                Some(_) if self.nx >= 3 => {
-                    cols = [(ix + self.nx - 1) % self.nx, ix, (ix + 1) % self.nx];
-                }
-                Some(_) => {
-                    for (k, c) in (0..self.nx).enumerate() {
-                        cols[k] = c;
-                    }
-                }
-                None => {
-                    if ix > 0 {
-                        cols[0] = ix - 1;
-                    }
-                    cols[1] = ix;
-                    if ix + 1 < self.nx {
-                        cols[2] = ix + 1;
-                    }
-                }
+        let cols = self.ax.around(self.ax.coord(xa));
+        let rows = self.az.around(self.az.coord(za));
+        for jz in rows {
+            if jz == usize::MAX {
+                continue;
             }
             for jx in cols {
                 if jx == usize::MAX {
                     continue;
                 }
-                let c = jz * self.nx + jx;
+                let c = jz * self.ax.n + jx;
                 let (s, e) = (self.cell_start[c] as usize, self.cell_start[c + 1] as usize);
                 for &b in &self.sorted[s..e] {
                     let b = b as usize;
-                    let mut dx = xa - x[b];
-                    if let Some(p) = self.periodic {
-                        dx -= p.length * (dx / p.length).round();
-                    }
-                    let dz = za - z[b];
+                    let dx = self.ax.diff(xa - x[b]);
+                    let dz = self.az.diff(za - z[b]);
                     let r2 = dx * dx + dz * dz;
                     if r2 < self.radius2 {
                         f(b, dx, dz, r2);
@@ -173,14 +205,17 @@ fn min_max(v: &[Real]) -> (Real, Real) {
 mod tests {
     use super::*;
 
-    fn brute(xa: Real, za: Real, x: &[Real], z: &[Real], r: Real, p: Option<PeriodicX>) -> Vec<usize> {
+    fn brute(xa: Real, za: Real, x: &[Real], z: &[Real], r: Real, p: Option<Period>, q: Option<Period>) -> Vec<usize> {
         let mut v: Vec<usize> = (0..x.len())
             .filter(|&b| {
                 let mut dx = xa - x[b];
                 if let Some(p) = p {
                     dx -= p.length * (dx / p.length).round();
                 }
-                let dz = za - z[b];
+                let mut dz = za - z[b];
+                if let Some(q) = q {
+                    dz -= q.length * (dz / q.length).round();
+                }
                 dx * dx + dz * dz < r * r
             })
             .collect();
@@ -198,14 +233,16 @@ mod tests {
         let n = 500;
         let x: Vec<Real> = (0..n).map(|_| rnd() * 1.0).collect();
         let z: Vec<Real> = (0..n).map(|_| rnd() * 0.7 - 0.2).collect();
-        for p in [None, Some(PeriodicX { x_min: 0.0, length: 1.0 })] {
+        let px = Some(Period { min: 0.0, length: 1.0 });
+        let pz = Some(Period { min: -0.2, length: 0.7 });
+        for (p, q) in [(None, None), (px, None), (None, pz), (px, pz)] {
             let mut cl = CellList::default();
-            cl.build(&x, &z, 0.13, p);
+            cl.build(&x, &z, 0.13, p, q);
             for a in 0..n {
                 let mut got = Vec::new();
                 cl.for_each_neighbour(x[a], z[a], &x, &z, |b, _, _, _| got.push(b));
                 got.sort_unstable();
-                assert_eq!(got, brute(x[a], z[a], &x, &z, 0.13, p), "particle {a} periodic {p:?}");
+                assert_eq!(got, brute(x[a], z[a], &x, &z, 0.13, p, q), "particle {a} periodic {p:?} {q:?}");
             }
         }
     }

@@ -3,7 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::kernel::KernelKind;
-use crate::neighbours::PeriodicX;
+use crate::neighbours::Period;
+use crate::waveform::WaveformSpec;
 use crate::Real;
 
 /// Viscous term of the momentum equation.
@@ -32,6 +33,17 @@ pub enum ViscousConstant {
     SupportRadius,
 }
 
+/// A time-dependent body force g(t) = `direction` · f(t) per unit mass, added to `body_force`
+/// (pulsatile channel flow: the forcing −∂p/∂x / ρ of Womersley's problem).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PulsatileForce {
+    /// Direction (not normalised: the components multiply f) \[1\].
+    pub direction: [Real; 2],
+    /// f(t) \[m/s²\].
+    pub waveform: WaveformSpec,
+}
+
 /// Parameters of the weakly compressible SPH solver.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -54,8 +66,12 @@ pub struct SphParams {
     pub viscous_constant: ViscousConstant,
     /// Body force per unit mass (g_x, g_z) \[m/s²\]. Default (0, 0).
     pub body_force: [Real; 2],
+    /// Time-dependent body force added to `body_force`. Default none.
+    pub body_force_pulsatile: Option<PulsatileForce>,
     /// Periodic boundary along x. Default none.
-    pub periodic_x: Option<PeriodicX>,
+    pub periodic_x: Option<Period>,
+    /// Periodic boundary along z. Default none.
+    pub periodic_z: Option<Period>,
     /// Courant number C_cfl of dt ≤ C_cfl h / (c + |u|max), in (0, 1\]. Default 0.25.
     pub cfl: Real,
     /// Viscous criterion factor C_ν of dt ≤ C_ν h² / ν, in (0, 0.5\]. Default 0.125.
@@ -84,7 +100,9 @@ impl Default for SphParams {
             viscous_term: ViscousTerm::MeanValue,
             viscous_constant: ViscousConstant::SecondMoment,
             body_force: [0.0, 0.0],
+            body_force_pulsatile: None,
             periodic_x: None,
+            periodic_z: None,
             cfl: 0.25,
             viscous_dt_factor: 0.125,
             force_dt_factor: 0.25,
@@ -105,14 +123,14 @@ pub struct ParamError {
     /// Offending value, printed.
     pub value: String,
     /// Allowed range, in words.
-    pub allowed: &'static str,
+    pub allowed: String,
 }
 
 fn check(field: &'static str, v: Real, ok: bool, allowed: &'static str) -> Result<(), ParamError> {
     if ok && v.is_finite() {
         Ok(())
     } else {
-        Err(ParamError { field, value: v.to_string(), allowed })
+        Err(ParamError { field, value: v.to_string(), allowed: allowed.to_string() })
     }
 }
 
@@ -136,10 +154,25 @@ impl SphParams {
         check("density_error_limit", d, d > 0.0 && d <= 1.0, "0 < density_error_limit <= 1")?;
         let r = self.dt_collapse_ratio;
         check("dt_collapse_ratio", r, (0.0..1.0).contains(&r), "0 <= dt_collapse_ratio < 1")?;
+        let min = 3.0 * self.kernel.support_factor() * self.h;
         if let Some(p) = self.periodic_x {
-            check("periodic_x.x_min", p.x_min, true, "finite [m]")?;
-            let min = 3.0 * self.kernel.support_factor() * self.h;
+            check("periodic_x.min", p.min, true, "finite [m]")?;
             check("periodic_x.length", p.length, p.length >= min, "length >= 3 kernel support radii [m]")?;
+        }
+        if let Some(p) = self.periodic_z {
+            check("periodic_z.min", p.min, true, "finite [m]")?;
+            check("periodic_z.length", p.length, p.length >= min, "length >= 3 kernel support radii [m]")?;
+        }
+        if let Some(f) = &self.body_force_pulsatile {
+            check("body_force_pulsatile.direction[0]", f.direction[0], true, "finite")?;
+            check("body_force_pulsatile.direction[1]", f.direction[1], true, "finite")?;
+            if let Err(e) = f.waveform.build() {
+                return Err(ParamError {
+                    field: "body_force_pulsatile.waveform",
+                    value: format!("(field `{}`)", e.field),
+                    allowed: e.reason,
+                });
+            }
         }
         Ok(())
     }
@@ -177,7 +210,7 @@ mod tests {
         assert!(e.to_string().contains("0 < cfl <= 1"), "{e}");
         let p = SphParams { h: Real::NAN, ..Default::default() };
         assert_eq!(p.validate().expect_err("nan h").field, "h");
-        let p = SphParams { periodic_x: Some(PeriodicX { x_min: 0.0, length: 1e-4 }), ..Default::default() };
+        let p = SphParams { periodic_x: Some(Period { min: 0.0, length: 1e-4 }), ..Default::default() };
         assert_eq!(p.validate().expect_err("short period").field, "periodic_x.length");
     }
 }

@@ -6,11 +6,22 @@
 //! * predictor: u* = uⁿ + Δt/2 F⁰, ρ* = ρⁿ + Δt/2 D⁰, r* = rⁿ + Δt/2 uⁿ;
 //! * corrector at the half state: u½ = uⁿ + Δt/2 F*, ρ½ = ρⁿ + Δt/2 D*, r½ = rⁿ + Δt/2 u½;
 //! * uⁿ⁺¹ = 2u½ − uⁿ, ρⁿ⁺¹ = 2ρ½ − ρⁿ, rⁿ⁺¹ = 2r½ − rⁿ.
+//!
+//! Time-dependent data are evaluated at the time of each stage (tⁿ, tⁿ + Δt/2, tⁿ⁺¹): the body
+//! force, the walls' prescribed motion and the reservoirs' imposed velocity. Reservoir particles
+//! move with the imposed velocity (rⁿ⁺¹ = rⁿ + Δt u(tⁿ⁺½)) and integrate their density like the
+//! fluid. After the step, particles are exchanged between the fluid and the reservoirs
+//! ([`crate::boundary::exchange`]) and, with a [`Domain`], the anti-penetration guard runs.
 
+use std::sync::Arc;
+
+use crate::boundary::{self, BoundaryFlux, BoundaryState, OpenBoundary};
 use crate::kernel::Kernel;
 use crate::neighbours::CellList;
 use crate::params::{ParamError, SphParams};
-use crate::particles::Particles;
+use crate::particles::{ParticleKind, Particles};
+use crate::walls::{BuiltMotion, Domain, WallMotion};
+use crate::waveform::Waveform;
 use crate::wcsph::{compute_rates, Workspace};
 use crate::Real;
 
@@ -111,6 +122,38 @@ pub struct StepReport {
     pub steps: u64,
 }
 
+/// State summary for monitoring (paper-independent acceptance signals, sph-validation.md §e).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnostics {
+    /// Simulation time \[s\].
+    pub time: Real,
+    /// Steps taken.
+    pub steps: u64,
+    /// Last step's report (None before the first step).
+    pub last_step: Option<StepReport>,
+    /// Free fluid particles.
+    pub n_fluid: usize,
+    /// Reservoir particles.
+    pub n_buffer: usize,
+    /// Wall particles.
+    pub n_wall: usize,
+    /// max |ρ/ρ₀ − 1| over free fluid particles now.
+    pub max_density_error: Real,
+    /// Kinetic energy of the free fluid ½ Σ m |u|² \[J/m\] (2D: per unit depth).
+    pub kinetic_energy: Real,
+    /// Mass of the free fluid \[kg/m\].
+    pub fluid_mass: Real,
+    /// Largest fluid speed \[m/s\].
+    pub max_speed: Real,
+    /// Smallest distance between a fluid particle and any other particle at the last evaluation, in
+    /// units of the initial lattice spacing estimate h / (h/dx) — reported in metres here \[m\].
+    pub min_pair_distance: Real,
+    /// Per open boundary: name and mass bookkeeping.
+    pub boundaries: Vec<(String, BoundaryFlux)>,
+    /// Times the anti-penetration guard had to put a fluid particle back inside the domain.
+    pub guard_corrections: u64,
+}
+
 /// Weakly compressible SPH solver owning its particles and buffers.
 #[derive(Debug)]
 pub struct Solver {
@@ -129,6 +172,15 @@ pub struct Solver {
     first_dt: Option<Real>,
     last: Option<StepReport>,
     steps: u64,
+    pulsatile: Option<([Real; 2], Waveform)>,
+    boundaries: Vec<BoundaryState>,
+    motions: Vec<BuiltMotion>,
+    motion_time: Real,
+    domain: Option<Arc<dyn Domain>>,
+    guard_corrections: u64,
+    next_id: u64,
+    keep: Vec<bool>,
+    checked: bool,
 }
 
 impl Solver {
@@ -141,6 +193,9 @@ impl Solver {
         if particles.fluid_count() == 0 {
             return Err(SphError::State("no fluid particle".into()));
         }
+        if !time.is_finite() {
+            return Err(SphError::State(format!("start time {time} is not finite")));
+        }
         for i in 0..particles.len() {
             let vals =
                 [particles.x[i], particles.z[i], particles.vx[i], particles.vz[i], particles.rho[i], particles.mass[i]];
@@ -151,7 +206,16 @@ impl Solver {
                 )));
             }
         }
+        let mut seen = std::collections::HashSet::with_capacity(particles.len());
+        if let Some(i) = particles.id.iter().position(|id| !seen.insert(*id)) {
+            return Err(SphError::State(format!("particle id {} appears twice: ids must be unique", particles.id[i])));
+        }
+        let pulsatile = match &params.body_force_pulsatile {
+            Some(f) => Some((f.direction, f.waveform.build().map_err(|e| SphError::State(e.to_string()))?)),
+            None => None,
+        };
         let kernel = Kernel::new(params.kernel, params.h);
+        let next_id = particles.next_free_id();
         let mut s = Solver {
             params,
             kernel,
@@ -167,9 +231,87 @@ impl Solver {
             first_dt: None,
             last: None,
             steps: 0,
+            pulsatile,
+            boundaries: Vec::new(),
+            motions: Vec::new(),
+            motion_time: time,
+            domain: None,
+            guard_corrections: 0,
+            next_id,
+            keep: Vec::new(),
+            checked: false,
         };
         s.wrap_positions();
         Ok(s)
+    }
+
+    /// Adds the open boundaries (reservoirs); reservoir particles' `group` indexes this list.
+    pub fn with_open_boundaries(mut self, boundaries: Vec<OpenBoundary>) -> Result<Self, SphError> {
+        let support = self.kernel.support_radius();
+        for b in &boundaries {
+            b.validate(support).map_err(SphError::State)?;
+        }
+        let nu = self.params.nu();
+        self.boundaries = boundaries.into_iter().map(|b| BoundaryState::new(b, nu)).collect();
+        self.checked = false;
+        boundary::impose(&mut self.boundaries, &mut self.particles, self.time);
+        Ok(self)
+    }
+
+    /// Adds prescribed wall motions; wall particles with `group` = k ≥ 1 follow motion k − 1.
+    pub fn with_wall_motions(mut self, motions: &[WallMotion]) -> Result<Self, SphError> {
+        self.motions = motions
+            .iter()
+            .enumerate()
+            .map(|(i, m)| BuiltMotion::new(m, i))
+            .collect::<Result<_, _>>()
+            .map_err(SphError::State)?;
+        self.checked = false;
+        self.motion_time = self.time;
+        self.move_walls(self.time);
+        Ok(self)
+    }
+
+    /// Sets the next id given to created particles (e.g. when resuming from a checkpoint).
+    pub fn set_next_id(&mut self, next_id: u64) {
+        self.next_id = self.next_id.max(next_id);
+    }
+
+    /// Adds the anti-penetration guard: after every step a fluid particle found outside `domain`
+    /// (signed distance > 0) is put back half a particle spacing inside along the distance gradient
+    /// and its outward normal velocity is removed; every correction is counted in
+    /// [`Diagnostics::guard_corrections`]. Not used with moving walls.
+    pub fn with_domain(mut self, domain: Arc<dyn Domain>) -> Self {
+        self.domain = Some(domain);
+        self
+    }
+
+    /// Every reservoir particle names an existing boundary and every moving wall an existing motion
+    /// (checked once, before the first step after a change).
+    fn check_ready(&mut self) -> Result<(), SphError> {
+        if self.checked {
+            return Ok(());
+        }
+        let p = &self.particles;
+        for i in 0..p.len() {
+            let g = p.group[i] as usize;
+            let bad = match p.kind[i] {
+                ParticleKind::Buffer => g >= self.boundaries.len(),
+                ParticleKind::WallOn | ParticleKind::WallOutside => g > self.motions.len(),
+                ParticleKind::Fluid => false,
+            };
+            if bad {
+                return Err(SphError::State(format!(
+                    "particle id {} ({:?}) has group {g}, but there are {} open boundaries and {} wall motions",
+                    p.id[i],
+                    p.kind[i],
+                    self.boundaries.len(),
+                    self.motions.len()
+                )));
+            }
+        }
+        self.checked = true;
+        Ok(())
     }
 
     /// Current time \[s\].
@@ -187,35 +329,140 @@ impl Solver {
         &self.kernel
     }
 
+    /// Open boundaries and their bookkeeping.
+    pub fn boundaries(&self) -> &[BoundaryState] {
+        &self.boundaries
+    }
+
     /// Diagnostics of the last step, if any.
     pub fn last_step(&self) -> Option<StepReport> {
         self.last
     }
 
-    /// Pressure of every particle at the last evaluation (walls: interpolated) \[Pa\].
-    pub fn pressure(&self) -> &[Real] {
-        &self.ws.p
+    /// Steps taken since the start.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Next particle id the solver will give to a created particle.
+    pub fn next_id(&self) -> u64 {
+        self.next_id
+    }
+
+    /// Body force per unit mass at time t \[m/s²\].
+    pub fn body_force_at(&self, t: Real) -> [Real; 2] {
+        let mut g = self.params.body_force;
+        if let Some((d, w)) = &self.pulsatile {
+            let f = w.value(t);
+            g[0] += d[0] * f;
+            g[1] += d[1] * f;
+        }
+        g
+    }
+
+    /// State summary now.
+    pub fn diagnostics(&self) -> Diagnostics {
+        let p = &self.particles;
+        let (mut nf, mut nb, mut nw) = (0, 0, 0);
+        let (mut ke, mut mass, mut emax, mut vmax, mut r2min) = (0.0, 0.0, 0.0 as Real, 0.0 as Real, Real::INFINITY);
+        let have_rates = self.ws.rates.len() == p.len();
+        for i in 0..p.len() {
+            match p.kind[i] {
+                ParticleKind::Fluid => {
+                    nf += 1;
+                    let v2 = p.vx[i] * p.vx[i] + p.vz[i] * p.vz[i];
+                    ke += 0.5 * p.mass[i] * v2;
+                    mass += p.mass[i];
+                    emax = emax.max((p.rho[i] / self.params.rho0 - 1.0).abs());
+                    vmax = vmax.max(v2.sqrt());
+                    if have_rates {
+                        r2min = r2min.min(self.ws.rates[i][3]);
+                    }
+                }
+                ParticleKind::Buffer => nb += 1,
+                _ => nw += 1,
+            }
+        }
+        Diagnostics {
+            time: self.time,
+            steps: self.steps,
+            last_step: self.last,
+            n_fluid: nf,
+            n_buffer: nb,
+            n_wall: nw,
+            max_density_error: emax,
+            kinetic_energy: ke,
+            fluid_mass: mass,
+            max_speed: vmax,
+            min_pair_distance: r2min.sqrt(),
+            boundaries: self.boundaries.iter().map(|b| (b.spec.name.clone(), b.flux)).collect(),
+            guard_corrections: self.guard_corrections,
+        }
     }
 
     fn wrap_positions(&mut self) {
-        if let Some(p) = self.params.periodic_x {
-            for (x, k) in self.particles.x.iter_mut().zip(&self.particles.kind) {
-                if !k.is_wall() {
-                    *x = p.wrap(*x);
-                }
+        let (px, pz) = (self.params.periodic_x, self.params.periodic_z);
+        if px.is_none() && pz.is_none() {
+            return;
+        }
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            if p.kind[i].is_wall() {
+                continue;
+            }
+            if let Some(q) = px {
+                p.x[i] = q.wrap(p.x[i]);
+            }
+            if let Some(q) = pz {
+                p.z[i] = q.wrap(p.z[i]);
             }
         }
     }
 
-    fn evaluate(&mut self) {
+    /// Moves the walls with a prescribed motion to time t (incremental: r += d(t) − d(t_prev)).
+    fn move_walls(&mut self, t: Real) {
+        if self.motions.is_empty() {
+            return;
+        }
+        let t_prev = self.motion_time;
+        let d: Vec<([Real; 2], [Real; 2])> = self
+            .motions
+            .iter()
+            .map(|m| {
+                let (a, b) = (m.displacement(t_prev), m.displacement(t));
+                ([b[0] - a[0], b[1] - a[1]], m.velocity(t))
+            })
+            .collect();
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            let g = p.group[i] as usize;
+            if p.kind[i].is_wall() && g > 0 {
+                let (dd, v) = d[g - 1];
+                p.x[i] += dd[0];
+                p.z[i] += dd[1];
+                p.vx[i] = v[0];
+                p.vz[i] = v[1];
+            }
+        }
+        self.motion_time = t;
+    }
+
+    /// Sets the time-dependent boundary data (moving walls, reservoir velocities) to time t.
+    fn set_boundary_time(&mut self, t: Real) {
+        self.move_walls(t);
+        boundary::impose(&mut self.boundaries, &mut self.particles, t);
+    }
+
+    fn evaluate(&mut self, t: Real) {
         let r = self.kernel.support_radius();
-        self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x);
-        compute_rates(&self.params, &self.kernel, &self.particles, &self.cells, &mut self.ws);
+        self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
+        let g = self.body_force_at(t);
+        compute_rates(&self.params, &self.kernel, &self.particles, &self.cells, g, &mut self.ws);
     }
 
     fn check_rates(&self) -> Result<(), SphError> {
         for (i, r) in self.ws.rates.iter().enumerate() {
-            if let Some(k) = r.iter().position(|v| !v.is_finite()) {
+            if let Some(k) = r[..3].iter().position(|v| !v.is_finite()) {
                 let quantity = ["density rate", "acceleration x", "acceleration z"][k];
                 return Err(self.blow_up(i, BlowUpCriterion::NonFinite { quantity }));
             }
@@ -233,16 +480,19 @@ impl Solver {
         let h = self.kernel.h;
         let (mut vmax2, mut amax2, mut amax_i) = (0.0 as Real, 0.0 as Real, 0usize);
         for i in 0..self.particles.len() {
-            if self.particles.kind[i].is_wall() {
-                continue;
+            match self.particles.kind[i] {
+                ParticleKind::Fluid => {
+                    let r = self.ws.rates[i];
+                    let a2 = r[1] * r[1] + r[2] * r[2];
+                    if a2 > amax2 {
+                        amax2 = a2;
+                        amax_i = i;
+                    }
+                }
+                ParticleKind::Buffer => {}
+                _ => continue,
             }
             vmax2 = vmax2.max(self.particles.vx[i].powi(2) + self.particles.vz[i].powi(2));
-            let r = self.ws.rates[i];
-            let a2 = r[1] * r[1] + r[2] * r[2];
-            if a2 > amax2 {
-                amax2 = a2;
-                amax_i = i;
-            }
         }
         let mut best = (p.dt_max, DtCriterion::Maximum);
         let mut consider = |dt: Real, c: DtCriterion| {
@@ -262,7 +512,10 @@ impl Solver {
 
     /// Takes one step of at most `dt_limit` seconds (if given).
     pub fn step(&mut self, dt_limit: Option<Real>) -> Result<StepReport, SphError> {
-        self.evaluate();
+        self.check_ready()?;
+        let t_n = self.time;
+        self.set_boundary_time(t_n);
+        self.evaluate(t_n);
         self.check_rates()?;
         let (mut dt, mut binding, amax_i) = self.adaptive_dt();
         if let Some(first) = self.first_dt {
@@ -287,23 +540,29 @@ impl Solver {
         self.vx0.clone_from(&self.particles.vx);
         self.vz0.clone_from(&self.particles.vz);
         self.rho0.clone_from(&self.particles.rho);
-        // Predictor.
+        // Predictor. Reservoir particles move with their imposed velocity; it is re-imposed at the
+        // half time below.
         {
             let pt = &mut self.particles;
             for i in 0..n {
-                if pt.kind[i].is_wall() {
-                    continue;
-                }
                 let r = self.ws.rates[i];
-                pt.x[i] += half * pt.vx[i];
-                pt.z[i] += half * pt.vz[i];
-                pt.vx[i] += half * r[1];
-                pt.vz[i] += half * r[2];
+                match pt.kind[i] {
+                    ParticleKind::Fluid => {
+                        pt.vx[i] += half * r[1];
+                        pt.vz[i] += half * r[2];
+                    }
+                    ParticleKind::Buffer => {}
+                    _ => continue,
+                }
+                pt.x[i] += half * self.vx0[i];
+                pt.z[i] += half * self.vz0[i];
                 pt.rho[i] += half * r[0];
             }
         }
         self.wrap_positions();
-        self.evaluate();
+        let t_half = t_n + half;
+        self.set_boundary_time(t_half);
+        self.evaluate(t_half);
         self.check_rates()?;
         // Corrector and final update.
         let mut max_err = 0.0 as Real;
@@ -312,12 +571,12 @@ impl Solver {
             let pt = &mut self.particles;
             let rho_ref = self.params.rho0;
             for i in 0..n {
-                if pt.kind[i].is_wall() {
-                    continue;
-                }
                 let r = self.ws.rates[i];
-                let vxh = self.vx0[i] + half * r[1];
-                let vzh = self.vz0[i] + half * r[2];
+                let (vxh, vzh) = match pt.kind[i] {
+                    ParticleKind::Fluid => (self.vx0[i] + half * r[1], self.vz0[i] + half * r[2]),
+                    ParticleKind::Buffer => (pt.vx[i], pt.vz[i]),
+                    _ => continue,
+                };
                 let rhoh = self.rho0[i] + half * r[0];
                 let xh = self.x0[i] + half * vxh;
                 let zh = self.z0[i] + half * vzh;
@@ -326,15 +585,20 @@ impl Solver {
                 pt.rho[i] = 2.0 * rhoh - self.rho0[i];
                 pt.x[i] = 2.0 * xh - self.x0[i];
                 pt.z[i] = 2.0 * zh - self.z0[i];
-                let e = (pt.rho[i] / rho_ref - 1.0).abs();
-                if e > max_err || e.is_nan() {
-                    max_err = e;
-                    worst = i;
+                if pt.kind[i].is_fluid() {
+                    let e = (pt.rho[i] / rho_ref - 1.0).abs();
+                    if e > max_err || e.is_nan() {
+                        max_err = e;
+                        worst = i;
+                    }
                 }
             }
         }
         for i in 0..n {
             let pt = &self.particles;
+            if pt.kind[i].is_wall() {
+                continue;
+            }
             let vals = [
                 ("position", pt.x[i]),
                 ("position", pt.z[i]),
@@ -351,11 +615,56 @@ impl Solver {
             return Err(self.blow_up(worst, BlowUpCriterion::DensityError { value: max_err, limit }));
         }
         self.wrap_positions();
-        self.time += dt;
+        let t_new = t_n + dt;
+        self.guard(t_new);
+        self.set_boundary_time(t_new);
+        boundary::exchange(
+            &mut self.boundaries,
+            &mut self.particles,
+            self.params.rho0,
+            &mut self.next_id,
+            &mut self.keep,
+        );
+        self.time = t_new;
         self.steps += 1;
         let rep = StepReport { dt, binding, max_density_error: max_err, steps: self.steps };
         self.last = Some(rep);
         Ok(rep)
+    }
+
+    /// Anti-penetration guard (see [`Solver::with_domain`]).
+    fn guard(&mut self, _t: Real) {
+        let Some(domain) = self.domain.clone() else { return };
+        if !self.motions.is_empty() {
+            return;
+        }
+        let dx = self.kernel.h; // pushed back by ~h/2 ≈ half a particle spacing
+        let e = 0.05 * dx;
+        let p = &mut self.particles;
+        for i in 0..p.len() {
+            if !p.kind[i].is_fluid() {
+                continue;
+            }
+            let d = domain.signed_distance(p.x[i], p.z[i]);
+            if d <= 0.0 {
+                continue;
+            }
+            let gx = domain.signed_distance(p.x[i] + e, p.z[i]) - domain.signed_distance(p.x[i] - e, p.z[i]);
+            let gz = domain.signed_distance(p.x[i], p.z[i] + e) - domain.signed_distance(p.x[i], p.z[i] - e);
+            let gn = (gx * gx + gz * gz).sqrt();
+            if gn > 0.0 && gn.is_finite() {
+                let (nx, nz) = (gx / gn, gz / gn);
+                let back = d + 0.5 * dx;
+                p.x[i] -= back * nx;
+                p.z[i] -= back * nz;
+                let vn = p.vx[i] * nx + p.vz[i] * nz;
+                if vn > 0.0 {
+                    p.vx[i] -= vn * nx;
+                    p.vz[i] -= vn * nz;
+                }
+            }
+            self.guard_corrections += 1;
+        }
     }
 
     /// Steps until exactly `t_target` (the last step is shortened; when less than two steps remain,
@@ -367,8 +676,6 @@ impl Solver {
         let mut last = None;
         while self.time < t_target {
             let left = t_target - self.time;
-            // Peek at the adaptive step by evaluating once inside `step`; limit it to `left`, or to
-            // half of `left` when `left` is between one and two steps (known from the last step).
             let limit = match self.last {
                 Some(r) if left > r.dt && left < 2.0 * r.dt => 0.5 * left,
                 _ => left,

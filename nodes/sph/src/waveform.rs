@@ -261,6 +261,18 @@ impl Waveform {
         f
     }
 
+    /// ∫₀ᵗ f(τ) dτ.
+    pub fn integral(&self, t: Real) -> Real {
+        let w = self.omega();
+        let mut f = self.mean * t;
+        for (k, (a, b)) in self.cos.iter().zip(&self.sin).enumerate() {
+            let kw = (k + 1) as Real * w;
+            let ph = kw * t;
+            f += (a * ph.sin() + b * (1.0 - ph.cos())) / kw;
+        }
+        f
+    }
+
     /// df/dt (t).
     pub fn derivative(&self, t: Real) -> Real {
         let w = self.omega();
@@ -348,6 +360,14 @@ mod tests {
         }
         let e = 1e-6;
         assert!((w.derivative(0.1) - (w.value(0.1 + e) - w.value(0.1 - e)) / (2.0 * e)).abs() < 1e-6);
+        // integral: Simpson over [0, 0.37]
+        let n = 2000;
+        let hq = 0.37 / n as Real;
+        let mut q = w.value(0.0) + w.value(0.37);
+        for j in 1..n {
+            q += w.value(j as Real * hq) * if j % 2 == 1 { 4.0 } else { 2.0 };
+        }
+        assert!((w.integral(0.37) - q * hq / 3.0).abs() < 1e-12, "{} vs {}", w.integral(0.37), q * hq / 3.0);
     }
 
     #[test]

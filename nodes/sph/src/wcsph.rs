@@ -23,8 +23,9 @@ pub struct Workspace {
     pub p: Vec<Real>,
     /// Density used in the interactions: fluid = own, walls from the interpolated pressure \[kg/m³\].
     pub rho: Vec<Real>,
-    /// Per particle: (Dρ/Dt \[kg/m³/s\], a_x, a_z \[m/s²\]); zero for walls.
-    pub rates: Vec<[Real; 3]>,
+    /// Per particle: (Dρ/Dt \[kg/m³/s\], a_x, a_z \[m/s²\], squared distance to the nearest other
+    /// particle \[m²\], ∞ without neighbours); zero for walls.
+    pub rates: Vec<[Real; 4]>,
     wall: Vec<[Real; 4]>,
 }
 
@@ -59,10 +60,18 @@ where
     out.extend((0..n).map(f));
 }
 
-/// Evaluates Dρ/Dt and the acceleration of every fluid particle into `ws.rates`, after filling
-/// the wall particles' velocity, pressure and density. `cells` must have been built on the current
-/// positions with radius ≥ the kernel support.
-pub fn compute_rates(params: &SphParams, kernel: &Kernel, particles: &Particles, cells: &CellList, ws: &mut Workspace) {
+/// Evaluates Dρ/Dt and the acceleration of every non-wall particle (fluid and reservoir) into
+/// `ws.rates`, after filling the wall particles' velocity, pressure and density. `g` is the body
+/// force per unit mass at the evaluation time. `cells` must have been built on the current positions
+/// with radius ≥ the kernel support.
+pub fn compute_rates(
+    params: &SphParams,
+    kernel: &Kernel,
+    particles: &Particles,
+    cells: &CellList,
+    g: [Real; 2],
+    ws: &mut Workspace,
+) {
     let n = particles.len();
     let (x, z) = (&particles.x[..], &particles.z[..]);
     let kind = &particles.kind[..];
@@ -79,7 +88,6 @@ pub fn compute_rates(params: &SphParams, kernel: &Kernel, particles: &Particles,
     // type I/II conditions): p_w = (Σ p_f W + g·Σ ρ_f r_wf W) / Σ W; type II u = 2 u_wall − ũ.
     {
         let (ux, uz, p) = (&ws.ux[..], &ws.uz[..], &ws.p[..]);
-        let g = params.body_force;
         map_indices(params.parallel, n, &mut ws.wall, |w| {
             if !kind[w].is_wall() {
                 return [0.0; 4];
@@ -120,22 +128,24 @@ pub fn compute_rates(params: &SphParams, kernel: &Kernel, particles: &Particles,
     let (ux, uz, p, rho, m) = (&ws.ux[..], &ws.uz[..], &ws.p[..], &ws.rho[..], &particles.mass[..]);
     let mean_value = params.viscous_term == ViscousTerm::MeanValue;
     let c_visc = mean_value_constant(kernel, params.viscous_constant);
-    let (mu, g) = (params.mu, params.body_force);
+    let mu = params.mu;
     let eta2 = 0.01 * kernel.h * kernel.h;
     let w0 = kernel.w(0.0);
     map_indices(params.parallel, n, &mut ws.rates, |a| {
         if kind[a].is_wall() {
-            return [0.0; 3];
+            return [0.0; 4];
         }
         let (uax, uaz, ra) = (ux[a], uz[a], rho[a]);
         let pa_term = p[a] / (ra * ra);
         let (mut drho, mut apx, mut apz) = (0.0, 0.0, 0.0);
         let (mut numx, mut numz, mut den) = (0.0, 0.0, m[a] / ra * w0);
         let (mut mvx, mut mvz) = (0.0, 0.0);
+        let mut r2min = Real::INFINITY;
         cells.for_each_neighbour(x[a], z[a], x, z, |b, dx, dz, r2| {
             if b == a {
                 return;
             }
+            r2min = r2min.min(r2);
             let r = r2.sqrt();
             let (wgt, dw) = kernel.w_dw(r);
             let f = dw / r; // ∇_a W_ab = (dx, dz) f
@@ -163,6 +173,6 @@ pub fn compute_rates(params: &SphParams, kernel: &Kernel, particles: &Particles,
         } else {
             (mvx, mvz)
         };
-        [drho, apx + avx + g[0], apz + avz + g[1]]
+        [drho, apx + avx + g[0], apz + avz + g[1], r2min]
     });
 }

@@ -3,9 +3,7 @@
 
 use sonoflow_sph::analytic::{couette, poiseuille};
 use sonoflow_sph::setup::ChannelConfig;
-use sonoflow_sph::{
-    BlowUpCriterion, DtCriterion, KernelKind, PeriodicX, Real, Solver, SphError, SphParams, ViscousTerm,
-};
+use sonoflow_sph::{BlowUpCriterion, DtCriterion, KernelKind, Period, Real, Solver, SphError, SphParams, ViscousTerm};
 
 const L: Real = 1e-3;
 const NU: Real = 1e-6;
@@ -23,7 +21,7 @@ fn channel(n_across: usize, top: Real) -> (ChannelConfig, SphParams) {
         c: 1e-2,
         mu: NU * RHO0,
         body_force: [if top == 0.0 { F } else { 0.0 }, 0.0],
-        periodic_x: Some(PeriodicX { x_min: 0.0, length: cfg.length() }),
+        periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
         dt_max: 1.0,
         ..Default::default()
     };

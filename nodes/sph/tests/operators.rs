@@ -88,9 +88,9 @@ fn kernel_sums_on_a_regular_lattice_match_the_continuous_identities() {
 fn rates_for(params: &SphParams, p: &Particles) -> Workspace {
     let k = Kernel::new(params.kernel, params.h);
     let mut cells = CellList::default();
-    cells.build(&p.x, &p.z, k.support_radius(), None);
+    cells.build(&p.x, &p.z, k.support_radius(), None, None);
     let mut ws = Workspace::default();
-    compute_rates(params, &k, p, &cells, &mut ws);
+    compute_rates(params, &k, p, &cells, params.body_force, &mut ws);
     ws
 }
 
