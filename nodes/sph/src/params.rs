@@ -64,6 +64,17 @@ pub struct SphParams {
     pub viscous_term: ViscousTerm,
     /// Constant of eq 12. Default: from the kernel's second moment (see [`ViscousConstant`]).
     pub viscous_constant: ViscousConstant,
+    /// δ of the δ-SPH density diffusion term (Molteni & Colagrossi 2009) added to eq 7,
+    /// δ h c Σ 2(ρ_b − ρ_a) (r_ba·∇_a W_ab)/r² V_b over fluid and reservoir neighbours, in \[0, 1\].
+    /// Default 0 (the paper has none; 0.1 is the usual value).
+    pub density_diffusion: Real,
+    /// Coefficient A of particle shifting (Lind et al. 2012, with the diffusion coefficient of Xu et al. 2009 /
+    /// Skillen et al. 2013 written D = A h |u|max Δt, |u|max the largest speed in the domain): after every step a fluid particle moves by δr = −D ∇C (capped at 0.1 h), and
+    /// its velocity is corrected to first order, u += (δr·∇)u. In \[0, 10\]; default 0 = off (the
+    /// paper). Shifting keeps the particle distribution regular where the flow stretches it (vortices,
+    /// recirculation), at the price of moving particles — the acoustic scatterers — slightly off their
+    /// material paths.
+    pub shifting: Real,
     /// Body force per unit mass (g_x, g_z) \[m/s²\]. Default (0, 0).
     pub body_force: [Real; 2],
     /// Time-dependent body force added to `body_force`. Default none.
@@ -99,6 +110,8 @@ impl Default for SphParams {
             mu: 4e-3,
             viscous_term: ViscousTerm::MeanValue,
             viscous_constant: ViscousConstant::SecondMoment,
+            density_diffusion: 0.0,
+            shifting: 0.0,
             body_force: [0.0, 0.0],
             body_force_pulsatile: None,
             periodic_x: None,
@@ -142,6 +155,9 @@ impl SphParams {
         check("c", self.c, self.c > 0.0, "c > 0 [m/s]")?;
         check("background_pressure", self.background_pressure, true, "finite [Pa]")?;
         check("mu", self.mu, self.mu >= 0.0, "mu >= 0 [Pa s]")?;
+        let d = self.density_diffusion;
+        check("density_diffusion", d, (0.0..=1.0).contains(&d), "0 <= density_diffusion <= 1")?;
+        check("shifting", self.shifting, (0.0..=10.0).contains(&self.shifting), "0 <= shifting <= 10")?;
         check("body_force[0]", self.body_force[0], true, "finite [m/s^2]")?;
         check("body_force[1]", self.body_force[1], true, "finite [m/s^2]")?;
         check("cfl", self.cfl, self.cfl > 0.0 && self.cfl <= 1.0, "0 < cfl <= 1")?;

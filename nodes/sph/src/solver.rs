@@ -376,7 +376,7 @@ impl Solver {
                     emax = emax.max((p.rho[i] / self.params.rho0 - 1.0).abs());
                     vmax = vmax.max(v2.sqrt());
                     if have_rates {
-                        r2min = r2min.min(self.ws.rates[i][3]);
+                        r2min = r2min.min(self.ws.rates[i].r2min);
                     }
                 }
                 ParticleKind::Buffer => nb += 1,
@@ -462,7 +462,7 @@ impl Solver {
 
     fn check_rates(&self) -> Result<(), SphError> {
         for (i, r) in self.ws.rates.iter().enumerate() {
-            if let Some(k) = r[..3].iter().position(|v| !v.is_finite()) {
+            if let Some(k) = [r.drho, r.acc[0], r.acc[1]].iter().position(|v| !v.is_finite()) {
                 let quantity = ["density rate", "acceleration x", "acceleration z"][k];
                 return Err(self.blow_up(i, BlowUpCriterion::NonFinite { quantity }));
             }
@@ -482,8 +482,8 @@ impl Solver {
         for i in 0..self.particles.len() {
             match self.particles.kind[i] {
                 ParticleKind::Fluid => {
-                    let r = self.ws.rates[i];
-                    let a2 = r[1] * r[1] + r[2] * r[2];
+                    let a = self.ws.rates[i].acc;
+                    let a2 = a[0] * a[0] + a[1] * a[1];
                     if a2 > amax2 {
                         amax2 = a2;
                         amax_i = i;
@@ -548,15 +548,15 @@ impl Solver {
                 let r = self.ws.rates[i];
                 match pt.kind[i] {
                     ParticleKind::Fluid => {
-                        pt.vx[i] += half * r[1];
-                        pt.vz[i] += half * r[2];
+                        pt.vx[i] += half * r.acc[0];
+                        pt.vz[i] += half * r.acc[1];
                     }
                     ParticleKind::Buffer => {}
                     _ => continue,
                 }
                 pt.x[i] += half * self.vx0[i];
                 pt.z[i] += half * self.vz0[i];
-                pt.rho[i] += half * r[0];
+                pt.rho[i] += half * r.drho;
             }
         }
         self.wrap_positions();
@@ -573,11 +573,11 @@ impl Solver {
             for i in 0..n {
                 let r = self.ws.rates[i];
                 let (vxh, vzh) = match pt.kind[i] {
-                    ParticleKind::Fluid => (self.vx0[i] + half * r[1], self.vz0[i] + half * r[2]),
+                    ParticleKind::Fluid => (self.vx0[i] + half * r.acc[0], self.vz0[i] + half * r.acc[1]),
                     ParticleKind::Buffer => (pt.vx[i], pt.vz[i]),
                     _ => continue,
                 };
-                let rhoh = self.rho0[i] + half * r[0];
+                let rhoh = self.rho0[i] + half * r.drho;
                 let xh = self.x0[i] + half * vxh;
                 let zh = self.z0[i] + half * vzh;
                 pt.vx[i] = 2.0 * vxh - self.vx0[i];
@@ -614,6 +614,7 @@ impl Solver {
             let limit = self.params.density_error_limit;
             return Err(self.blow_up(worst, BlowUpCriterion::DensityError { value: max_err, limit }));
         }
+        self.shift(dt);
         self.wrap_positions();
         let t_new = t_n + dt;
         self.guard(t_new);
@@ -630,6 +631,41 @@ impl Solver {
         let rep = StepReport { dt, binding, max_density_error: max_err, steps: self.steps };
         self.last = Some(rep);
         Ok(rep)
+    }
+
+    /// Particle shifting (see [`SphParams::shifting`]), with ∇C and ∇u of the half-step evaluation.
+    fn shift(&mut self, dt: Real) {
+        let a = self.params.shifting;
+        if a <= 0.0 {
+            return;
+        }
+        let h = self.kernel.h;
+        let cap = 0.1 * h;
+        let p = &mut self.particles;
+        let mut umax2: Real = 0.0;
+        for i in 0..p.len() {
+            if !p.kind[i].is_wall() {
+                umax2 = umax2.max(p.vx[i] * p.vx[i] + p.vz[i] * p.vz[i]);
+            }
+        }
+        let d = a * h * umax2.sqrt() * dt;
+        for i in 0..p.len() {
+            if !p.kind[i].is_fluid() {
+                continue;
+            }
+            let r = &self.ws.rates[i];
+            let (mut sx, mut sz) = (-d * r.grad_c[0], -d * r.grad_c[1]);
+            let len = (sx * sx + sz * sz).sqrt();
+            if len > cap {
+                sx *= cap / len;
+                sz *= cap / len;
+            }
+            p.x[i] += sx;
+            p.z[i] += sz;
+            let g = r.grad_u;
+            p.vx[i] += sx * g[0] + sz * g[1];
+            p.vz[i] += sx * g[2] + sz * g[3];
+        }
     }
 
     /// Anti-penetration guard (see [`Solver::with_domain`]).

@@ -23,10 +23,24 @@ pub struct Workspace {
     pub p: Vec<Real>,
     /// Density used in the interactions: fluid = own, walls from the interpolated pressure \[kg/m³\].
     pub rho: Vec<Real>,
-    /// Per particle: (Dρ/Dt \[kg/m³/s\], a_x, a_z \[m/s²\], squared distance to the nearest other
-    /// particle \[m²\], ∞ without neighbours); zero for walls.
-    pub rates: Vec<[Real; 4]>,
+    /// Per particle rates and sums; zero for walls.
+    pub rates: Vec<Rate>,
     wall: Vec<[Real; 4]>,
+}
+
+/// Result of one right-hand-side evaluation for one particle.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Rate {
+    /// Dρ/Dt \[kg/m³/s\].
+    pub drho: Real,
+    /// Acceleration (a_x, a_z) \[m/s²\].
+    pub acc: [Real; 2],
+    /// Squared distance to the nearest other particle \[m²\] (∞ without neighbours).
+    pub r2min: Real,
+    /// Concentration gradient ∇C = Σ V_b (1 + 0.2 (W_ab/W(Δp))⁴) ∇_a W_ab \[1/m\] (only with shifting).
+    pub grad_c: [Real; 2],
+    /// Velocity gradient (∂u_x/∂x, ∂u_x/∂z, ∂u_z/∂x, ∂u_z/∂z) \[1/s\] (eq 6a; only with shifting).
+    pub grad_u: [Real; 4],
 }
 
 /// Constant C of the mean-value viscous term (eq 12) for `kernel` (see [`ViscousConstant`]).
@@ -131,10 +145,17 @@ pub fn compute_rates(
     let mu = params.mu;
     let eta2 = 0.01 * kernel.h * kernel.h;
     let w0 = kernel.w(0.0);
+    let delta_hc2 = 2.0 * params.density_diffusion * kernel.h * params.c;
+    let diffusion = params.density_diffusion > 0.0;
+    let shifting = params.shifting > 0.0;
     map_indices(params.parallel, n, &mut ws.rates, |a| {
         if kind[a].is_wall() {
-            return [0.0; 4];
+            return Rate::default();
         }
+        // W at the particle spacing Δp = √(m/ρ₀), for the anti-clumping term of the shifting gradient
+        let w_dp = if shifting { kernel.w((m[a] / params.rho0).sqrt()) } else { 1.0 };
+        let (mut gcx, mut gcz) = (0.0, 0.0);
+        let mut gu = [0.0; 4];
         let (uax, uaz, ra) = (ux[a], uz[a], rho[a]);
         let pa_term = p[a] / (ra * ra);
         let (mut drho, mut apx, mut apz) = (0.0, 0.0, 0.0);
@@ -153,6 +174,22 @@ pub fn compute_rates(
             let (dux, duz) = (uax - ux[b], uaz - uz[b]);
             let rb = rho[b];
             drho += m[b] * (dux * gx + duz * gz);
+            if diffusion && !kind[b].is_wall() {
+                // δ-SPH (Molteni & Colagrossi 2009): δ h c Σ 2(ρ_b − ρ_a) (r_ba·∇_a W)/r² V_b
+                drho -= delta_hc2 * (rb - ra) * (dx * gx + dz * gz) / (r2 + eta2) * m[b] / rb;
+            }
+            if shifting {
+                let vb = m[b] / rb;
+                let q = wgt / w_dp;
+                let q2 = q * q;
+                let corr = vb * (1.0 + 0.2 * q2 * q2);
+                gcx += corr * gx;
+                gcz += corr * gz;
+                gu[0] -= vb * dux * gx;
+                gu[1] -= vb * dux * gz;
+                gu[2] -= vb * duz * gx;
+                gu[3] -= vb * duz * gz;
+            }
             let pt = m[b] * (p[b] / (rb * rb) + pa_term);
             apx -= pt * gx;
             apz -= pt * gz;
@@ -173,6 +210,6 @@ pub fn compute_rates(
         } else {
             (mvx, mvz)
         };
-        [drho, apx + avx + g[0], apz + avz + g[1], r2min]
+        Rate { drho, acc: [apx + avx + g[0], apz + avz + g[1]], r2min, grad_c: [gcx, gcz], grad_u: gu }
     });
 }
