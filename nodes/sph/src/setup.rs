@@ -57,3 +57,99 @@ impl ChannelConfig {
         p
     }
 }
+
+/// Plane channel between plates z = 0 and z = `width` from x = 0 to x = `length`, with an inflow
+/// reservoir at x < 0 (opening at x = 0, normal −x) and an outflow reservoir at x > `length`
+/// (normal +x), both `depth` deep; the plates (type I on them, type II layers outside) run over the
+/// reservoirs too. The inlet imposes the mean velocity `inflow(t)` (into the domain, +x), the outlet
+/// the same flow rate leaving (mean inward velocity −inflow). Lattice rows at z = j dx, columns at
+/// x = (i − ½) dx, so the reservoirs continue the lattice without a seam.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpenChannelConfig {
+    /// Plate separation L \[m\].
+    pub width: Real,
+    /// dx = L / `n_across`.
+    pub n_across: usize,
+    /// Number of lattice columns between the openings (length = `n_along` · dx).
+    pub n_along: usize,
+    /// Layers of type II particles outside each plate.
+    pub wall_layers: usize,
+    /// Reservoir depth in lattice spacings.
+    pub reservoir_columns: usize,
+    /// Reference density ρ₀ \[kg/m³\]; mass = ρ₀ dx².
+    pub rho0: Real,
+    /// Kinematic viscosity ν \[m²/s\] (for the imposed Womersley profile).
+    pub nu: Real,
+    /// Cross-section mean velocity through the inlet \[m/s\].
+    pub inflow: crate::waveform::Waveform,
+    /// Profile across the openings.
+    pub profile: crate::boundary::ProfileKind,
+    /// Start the fluid with the fully developed profile at t = 0 (else at rest).
+    pub developed: bool,
+}
+
+impl OpenChannelConfig {
+    /// Lattice spacing \[m\].
+    pub fn dx(&self) -> Real {
+        self.width / self.n_across as Real
+    }
+
+    /// Distance between the openings \[m\].
+    pub fn length(&self) -> Real {
+        self.n_along as Real * self.dx()
+    }
+
+    /// The two open boundaries (inlet first).
+    pub fn boundaries(&self) -> Vec<crate::boundary::OpenBoundary> {
+        let (dx, a) = (self.dx(), 0.5 * self.width);
+        let depth = self.reservoir_columns as Real * dx;
+        let mk = |name: &str, x: Real, nx: Real, inflow: crate::waveform::Waveform| crate::boundary::OpenBoundary {
+            name: name.into(),
+            origin: [x, a],
+            normal: [nx, 0.0],
+            half_width: a,
+            depth,
+            dx,
+            inflow,
+            profile: self.profile,
+            ramp_time: 0.0,
+        };
+        vec![mk("inlet", 0.0, -1.0, self.inflow.clone()), mk("outlet", self.length(), 1.0, self.inflow.scaled(-1.0))]
+    }
+
+    /// Builds fluid, walls and filled reservoirs; returns the particles and the boundaries.
+    pub fn build(&self) -> (Particles, Vec<crate::boundary::OpenBoundary>) {
+        let dx = self.dx();
+        let a = 0.5 * self.width;
+        let m = self.rho0 * dx * dx;
+        let mut p = Particles::default();
+        let mut id = 0u64;
+        let n = self.n_across as i64;
+        let lay = self.wall_layers as i64;
+        let res = self.reservoir_columns as i64;
+        // walls over the whole length including the reservoirs
+        for j in (-lay..=0).chain(n..=n + lay) {
+            let kind = if j == 0 || j == n { ParticleKind::WallOn } else { ParticleKind::WallOutside };
+            for i in -res..self.n_along as i64 + res {
+                p.push((i as Real + 0.5) * dx, j as Real * dx, 0.0, 0.0, self.rho0, m, kind, id);
+                id += 1;
+            }
+        }
+        let mut table = crate::womersley::ProfileTable::new(&self.inflow, a, self.nu, 257, false);
+        table.set_time(0.0);
+        for j in 1..n {
+            for i in 0..self.n_along {
+                let z = j as Real * dx;
+                let u = if self.developed { table.at(z - a) } else { 0.0 };
+                p.push((i as Real + 0.5) * dx, z, u, 0.0, self.rho0, m, ParticleKind::Fluid, id);
+                id += 1;
+            }
+        }
+        let bs = self.boundaries();
+        for (k, b) in bs.iter().enumerate() {
+            let r = b.fill(k as u16, self.rho0, self.nu, 0.0, &mut id);
+            p.append(&r);
+        }
+        (p, bs)
+    }
+}

@@ -9,8 +9,8 @@
 //!
 //! Time-dependent data are evaluated at the time of each stage (tⁿ, tⁿ + Δt/2, tⁿ⁺¹): the body
 //! force, the walls' prescribed motion and the reservoirs' imposed velocity. Reservoir particles
-//! move with the imposed velocity (rⁿ⁺¹ = rⁿ + Δt u(tⁿ⁺½)) and integrate their density like the
-//! fluid. After the step, particles are exchanged between the fluid and the reservoirs
+//! move with the imposed velocity (rⁿ⁺¹ = rⁿ + Δt u(tⁿ⁺½)); their density is extrapolated from the
+//! fluid at every stage. After the step, particles are exchanged between the fluid and the reservoirs
 //! ([`crate::boundary::exchange`]) and, with a [`Domain`], the anti-penetration guard runs.
 
 use std::sync::Arc;
@@ -180,6 +180,7 @@ pub struct Solver {
     guard_corrections: u64,
     next_id: u64,
     keep: Vec<bool>,
+    sums: Vec<(Real, u32)>,
     checked: bool,
 }
 
@@ -239,6 +240,7 @@ impl Solver {
             guard_corrections: 0,
             next_id,
             keep: Vec::new(),
+            sums: Vec::new(),
             checked: false,
         };
         s.wrap_positions();
@@ -447,10 +449,21 @@ impl Solver {
         self.motion_time = t;
     }
 
-    /// Sets the time-dependent boundary data (moving walls, reservoir velocities) to time t.
+    /// Sets the time-dependent boundary data (moving walls, reservoir velocities and densities) to
+    /// time t.
     fn set_boundary_time(&mut self, t: Real) {
         self.move_walls(t);
         boundary::impose(&mut self.boundaries, &mut self.particles, t);
+        if !self.boundaries.is_empty() {
+            let support = self.kernel.support_radius();
+            boundary::extrapolate_density(
+                &self.boundaries,
+                &mut self.particles,
+                support,
+                self.params.rho0,
+                &mut self.sums,
+            );
+        }
     }
 
     fn evaluate(&mut self, t: Real) {
@@ -551,7 +564,12 @@ impl Solver {
                         pt.vx[i] += half * r.acc[0];
                         pt.vz[i] += half * r.acc[1];
                     }
-                    ParticleKind::Buffer => {}
+                    ParticleKind::Buffer => {
+                        // velocity and density are imposed/extrapolated at every stage
+                        pt.x[i] += half * self.vx0[i];
+                        pt.z[i] += half * self.vz0[i];
+                        continue;
+                    }
                     _ => continue,
                 }
                 pt.x[i] += half * self.vx0[i];
@@ -574,7 +592,11 @@ impl Solver {
                 let r = self.ws.rates[i];
                 let (vxh, vzh) = match pt.kind[i] {
                     ParticleKind::Fluid => (self.vx0[i] + half * r.acc[0], self.vz0[i] + half * r.acc[1]),
-                    ParticleKind::Buffer => (pt.vx[i], pt.vz[i]),
+                    ParticleKind::Buffer => {
+                        pt.x[i] = self.x0[i] + dt * pt.vx[i];
+                        pt.z[i] = self.z0[i] + dt * pt.vz[i];
+                        continue;
+                    }
                     _ => continue,
                 };
                 let rhoh = self.rho0[i] + half * r.drho;

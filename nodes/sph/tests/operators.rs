@@ -114,10 +114,12 @@ fn laplacian_errors(kind: KernelKind, term: ViscousTerm, h_over_dx: Real, jit: R
     let idx: Vec<usize> =
         interior(&p, n, dx, support).into_iter().filter(|&i| jit == 0.0 || p.z[i].abs() < 2.0 * dx).collect();
     assert!(!idx.is_empty());
-    let errs: Vec<Real> =
-        idx.iter().map(|&i| (ws.rates[i][1] / nu / 2.0 - 1.0).abs().max((ws.rates[i][2] / nu).abs() / 2.0)).collect();
+    let errs: Vec<Real> = idx
+        .iter()
+        .map(|&i| (ws.rates[i].acc[0] / nu / 2.0 - 1.0).abs().max((ws.rates[i].acc[1] / nu).abs() / 2.0))
+        .collect();
     let mean_abs = errs.iter().sum::<Real>() / errs.len() as Real;
-    let bias = idx.iter().map(|&i| ws.rates[i][1] / nu / 2.0 - 1.0).sum::<Real>() / idx.len() as Real;
+    let bias = idx.iter().map(|&i| ws.rates[i].acc[0] / nu / 2.0 - 1.0).sum::<Real>() / idx.len() as Real;
     (errs.iter().copied().fold(0.0, Real::max), mean_abs, bias)
 }
 
@@ -147,7 +149,7 @@ fn literal_support_radius_constant_is_3_9_times_too_weak_for_the_quartic_spline(
     let a = rates_for(&base, &p);
     let b = rates_for(&lit, &p);
     let i = (n / 2) * n + n / 2;
-    let ratio = a.rates[i][1] / b.rates[i][1];
+    let ratio = a.rates[i].acc[0] / b.rates[i].acc[0];
     // (4/M2) / (8/(2.5h)^2) = 4/0.79939 / 1.28 = 3.909
     assert!((ratio - 3.909).abs() < 0.01, "ratio {ratio}");
 }
@@ -183,7 +185,7 @@ fn continuity_on_a_linear_field_gives_minus_rho_div_u_within_3_percent() {
             let support = Kernel::new(kind, params.h).support_radius();
             let errs: Vec<Real> = interior(&p, n, dx, support)
                 .iter()
-                .map(|&i| (ws.rates[i][0] / (-2.0 * rho0 * s) - 1.0).abs())
+                .map(|&i| (ws.rates[i].drho / (-2.0 * rho0 * s) - 1.0).abs())
                 .collect();
             let max = errs.iter().copied().fold(0.0, Real::max);
             let mean = errs.iter().sum::<Real>() / errs.len() as Real;
@@ -210,7 +212,7 @@ fn pressure_term_of_a_linear_pressure_field_gives_minus_grad_p_over_rho() {
     let support = Kernel::new(params.kernel, params.h).support_radius();
     for i in interior(&p, n, dx, support) {
         let expect = -rho0 * g / p.rho[i];
-        assert!((ws.rates[i][2] / expect - 1.0).abs() < 0.01, "{} vs {expect}", ws.rates[i][2]);
-        assert!(ws.rates[i][1].abs() < 1e-9);
+        assert!((ws.rates[i].acc[1] / expect - 1.0).abs() < 0.01, "{} vs {expect}", ws.rates[i].acc[1]);
+        assert!(ws.rates[i].acc[0].abs() < 1e-9);
     }
 }

@@ -15,10 +15,10 @@ fn fit(ts: &[Real], us: &[Real], omega: Real) -> (Real, Real) {
     let mut r = [0.0; 3];
     for (&t, &u) in ts.iter().zip(us) {
         let f = [1.0, (omega * t).cos(), (omega * t).sin()];
-        for i in 0..3 {
+        for (i, row) in m.iter_mut().enumerate() {
             r[i] += f[i] * u;
-            for j in 0..3 {
-                m[i][j] += f[i] * f[j];
+            for (j, v) in row.iter_mut().enumerate() {
+                *v += f[i] * f[j];
             }
         }
     }
@@ -27,8 +27,9 @@ fn fit(ts: &[Real], us: &[Real], omega: Real) -> (Real, Real) {
         let p = m[i][i];
         for j in i + 1..3 {
             let q = m[j][i] / p;
-            for k in 0..3 {
-                m[j][k] -= q * m[i][k];
+            let mi = m[i];
+            for (v, w) in m[j].iter_mut().zip(mi) {
+                *v -= q * w;
             }
             r[j] -= q * r[i];
         }

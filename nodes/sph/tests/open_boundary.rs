@@ -1,0 +1,168 @@
+//! Open boundaries (the paper's virtual reservoirs): a plane channel fed through an inlet reservoir
+//! and drained through an outlet reservoir, steady and with flow reversal.
+
+use sonoflow_sph::setup::OpenChannelConfig;
+use sonoflow_sph::womersley::profile_velocity;
+use sonoflow_sph::{ParticleKind, ProfileKind, Real, Solver, SphParams, Waveform, WaveformSpec};
+use std::collections::HashSet;
+
+const RHO0: Real = 1000.0;
+const NU: Real = 4e-6;
+
+fn channel(inflow: Waveform, developed: bool) -> (OpenChannelConfig, Solver) {
+    // L = 2 mm, 20 across (dx = 0.1 mm), 4 mm between the openings, reservoirs 4 dx deep
+    // (support 3 dx at h = 1.2 dx).
+    let cfg = OpenChannelConfig {
+        width: 2e-3,
+        n_across: 20,
+        n_along: 40,
+        wall_layers: 3,
+        reservoir_columns: 4,
+        rho0: RHO0,
+        nu: NU,
+        inflow,
+        profile: ProfileKind::Womersley,
+        developed,
+    };
+    let dx = cfg.dx();
+    // mean 0.02 m/s (Re = 10); c from Morris' criterion with the pressure gradient 12 ν ū / L² ≈
+    // 0.24 m/s² over L/δ: c ≥ 0.22 m/s; take 0.5 (Ma = 0.06).
+    let params = SphParams { h: 1.2 * dx, rho0: RHO0, c: 0.5, mu: NU * RHO0, dt_max: 1.0, ..Default::default() };
+    let (p, bs) = cfg.build();
+    let s = Solver::new(params, p, 0.0).expect("valid").with_open_boundaries(bs).expect("valid boundaries");
+    (cfg, s)
+}
+
+/// Row-binned vx over x ∈ [x0, x1] against `exact(z)`, E∞ relative to `scale`.
+fn profile_error(s: &Solver, dx: Real, x0: Real, x1: Real, scale: Real, exact: impl Fn(Real) -> Real) -> Real {
+    let p = &s.particles;
+    let mut e: Real = 0.0;
+    for row in 1..20 {
+        let z = row as Real * dx;
+        let (mut sum, mut n) = (0.0, 0);
+        for i in 0..p.len() {
+            if p.kind[i] == ParticleKind::Fluid && (p.z[i] - z).abs() < 0.5 * dx && p.x[i] > x0 && p.x[i] < x1 {
+                sum += p.vx[i];
+                n += 1;
+            }
+        }
+        assert!(n > 0, "row {row} empty");
+        e = e.max((sum / n as Real - exact(z)).abs() / scale);
+    }
+    e
+}
+
+fn assert_ids_unique_and_particles_inside(s: &Solver, cfg: &OpenChannelConfig) {
+    let p = &s.particles;
+    let mut seen = HashSet::new();
+    for i in 0..p.len() {
+        assert!(seen.insert(p.id[i]), "id {} twice", p.id[i]);
+        if !p.kind[i].is_wall() {
+            assert!(p.z[i] > 0.0 && p.z[i] < cfg.width, "particle id {} at z = {} crossed a plate", p.id[i], p.z[i]);
+        }
+        if p.kind[i] == ParticleKind::Fluid {
+            assert!(
+                p.x[i] > -1e-12 && p.x[i] <= cfg.length() + 1e-12,
+                "fluid id {} at x = {} in a reservoir",
+                p.id[i],
+                p.x[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn steady_inflow_gives_the_poiseuille_profile_and_balanced_mass_flux() {
+    let u_mean = 0.02;
+    let (cfg, mut s) = channel(WaveformSpec::Constant { value: u_mean }.build().expect("ok"), true);
+    let dx = cfg.dx();
+    let a = 0.5 * cfg.width;
+    let n_fluid0 = s.diagnostics().n_fluid;
+    let mass0 = s.diagnostics().fluid_mass;
+    let next0 = s.next_id();
+    // one flow-through time L_x / ū = 0.2 s
+    let t_end = 0.2;
+    s.advance_to(t_end).expect("no blow-up");
+    let d = s.diagnostics();
+    let umax = 1.5 * u_mean;
+    let e = profile_error(&s, dx, 0.25 * cfg.length(), 0.75 * cfg.length(), umax, |z| {
+        1.5 * u_mean * (1.0 - ((z - a) / a).powi(2))
+    });
+    let (inl, outl) = (d.boundaries[0].1, d.boundaries[1].1);
+    // discrete inflow mass flux: ρ₀ Σ_j u(y_j) dy t (trapezoid of the parabola over n = 20 intervals)
+    let expected_in = RHO0 * u_mean * cfg.width * t_end * (1.0 - 1.0 / (20.0 * 20.0));
+    eprintln!(
+        "steady open channel: E_inf {:.2} % of u_max, fluid {} -> {}, mass in {:.4e} (expected {:.4e}), out {:.4e}, created {} removed {}, max |rho/rho0-1| {:.2e}, steps {}",
+        100.0 * e,
+        n_fluid0,
+        d.n_fluid,
+        inl.net_in(),
+        expected_in,
+        -outl.net_in(),
+        inl.created,
+        outl.removed,
+        d.max_density_error,
+        d.steps
+    );
+    assert!(e <= 0.03, "profile E_inf {e}");
+    assert!((inl.net_in() / expected_in - 1.0).abs() < 0.01, "inflow mass {} vs {expected_in}", inl.net_in());
+    assert!(
+        (-outl.net_in() / inl.net_in() - 1.0).abs() < 0.02,
+        "outflow {} vs inflow {}",
+        -outl.net_in(),
+        inl.net_in()
+    );
+    // mass conservation: fluid mass change = net inflow through both openings
+    let net = inl.net_in() + outl.net_in();
+    assert!((d.fluid_mass - mass0 - net).abs() < 1e-9 * mass0, "mass {} -> {}, net {net}", mass0, d.fluid_mass);
+    assert!((d.n_fluid as Real / n_fluid0 as Real - 1.0).abs() < 0.02, "{n_fluid0} -> {}", d.n_fluid);
+    assert!(inl.created > 0 && outl.removed > 0);
+    assert_eq!(s.next_id(), next0 + inl.created + outl.created, "every created particle got a fresh id");
+    assert_ids_unique_and_particles_inside(&s, &cfg);
+}
+
+#[test]
+fn oscillating_flow_reverses_through_both_reservoirs_and_follows_womersley() {
+    // Zero-mean oscillating flow rate, T = 0.2 s, ū amplitude 0.02 m/s (α = a √(ω/ν) = 2.8): the
+    // inlet becomes an outlet half of the time (backflow through both reservoirs).
+    let period = 0.2;
+    let w = WaveformSpec::Cosine { amplitude: 0.02, period, phase: 0.0, offset: 0.0 }.build().expect("ok");
+    let (cfg, mut s) = channel(w.clone(), true);
+    let dx = cfg.dx();
+    let a = 0.5 * cfg.width;
+    let n_fluid0 = s.diagnostics().n_fluid;
+    let mut worst: Real = 0.0;
+    for k in 1..=8 {
+        let t = 0.125 * period * k as Real + period; // second period, 8 phases
+        if k == 1 {
+            s.advance_to(period).expect("no blow-up");
+        }
+        s.advance_to(t).expect("no blow-up");
+        let e = profile_error(&s, dx, 0.25 * cfg.length(), 0.75 * cfg.length(), 0.03, |z| {
+            profile_velocity(&w, z - a, t, a, NU)
+        });
+        worst = worst.max(e);
+        assert_ids_unique_and_particles_inside(&s, &cfg);
+    }
+    let d = s.diagnostics();
+    let (inl, outl) = (d.boundaries[0].1, d.boundaries[1].1);
+    eprintln!(
+        "oscillating open channel: worst E_inf {:.2} % of 0.03 m/s over 8 phases, fluid {} -> {}, inlet in/out {:.3e}/{:.3e}, outlet in/out {:.3e}/{:.3e}, created {}/{}, removed {}/{}",
+        100.0 * worst,
+        n_fluid0,
+        d.n_fluid,
+        inl.mass_in,
+        inl.mass_out,
+        outl.mass_in,
+        outl.mass_out,
+        inl.created,
+        outl.created,
+        inl.removed,
+        outl.removed
+    );
+    assert!(worst <= 0.03, "profile error {worst}");
+    // both openings saw flow in both directions
+    assert!(inl.mass_out > 0.0 && outl.mass_in > 0.0, "no backflow seen");
+    assert!(inl.removed > 0 && outl.created > 0);
+    assert!((d.n_fluid as Real / n_fluid0 as Real - 1.0).abs() < 0.03, "{n_fluid0} -> {}", d.n_fluid);
+}
