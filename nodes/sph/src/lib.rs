@@ -15,10 +15,12 @@
 //! * [`waveform`]: periodic waveforms (Fourier series; the synthetic carotid inlet waveform).
 //! * [`womersley`]: 2D channel Womersley solutions (validation reference and imposed inlet profile).
 //! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
+//! * [`checkpoint`]: the solver state in one checked file (start from a saved state).
 //! * [`walls`]: prescribed wall motion and the fluid domain of the anti-penetration guard.
 
 pub mod analytic;
 pub mod boundary;
+pub mod checkpoint;
 pub mod kernel;
 pub mod neighbours;
 pub mod params;
@@ -34,6 +36,7 @@ pub mod womersley;
 pub type Real = f64;
 
 pub use boundary::{BoundaryFlux, OpenBoundary, ProfileKind};
+pub use checkpoint::{Checkpoint, CheckpointError, CheckpointHeader};
 pub use kernel::{Kernel, KernelKind};
 pub use neighbours::{CellList, Period};
 pub use params::{ParamError, PulsatileForce, SphParams, ViscousConstant, ViscousTerm};

@@ -16,6 +16,7 @@
 use std::sync::Arc;
 
 use crate::boundary::{self, BoundaryFlux, BoundaryState, OpenBoundary};
+use crate::checkpoint::{Checkpoint, CheckpointHeader};
 use crate::kernel::Kernel;
 use crate::neighbours::CellList;
 use crate::params::{ParamError, SphParams};
@@ -26,7 +27,7 @@ use crate::wcsph::{compute_rates, Workspace};
 use crate::Real;
 
 /// Which criterion set the time step.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum DtCriterion {
     /// Acoustic CFL: C_cfl h / (c + |u|max).
     Cfl,
@@ -110,7 +111,7 @@ pub enum SphError {
 }
 
 /// Diagnostics of the last step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepReport {
     /// Time step taken \[s\].
     pub dt: Real,
@@ -274,9 +275,53 @@ impl Solver {
         Ok(self)
     }
 
-    /// Sets the next id given to created particles (e.g. when resuming from a checkpoint).
-    pub fn set_next_id(&mut self, next_id: u64) {
-        self.next_id = self.next_id.max(next_id);
+    /// The full state, to write with [`Checkpoint::write`].
+    pub fn checkpoint(&self) -> Checkpoint {
+        Checkpoint {
+            header: CheckpointHeader {
+                time: self.time,
+                steps: self.steps,
+                next_id: self.next_id,
+                n_particles: self.particles.len() as u64,
+                first_dt: self.first_dt,
+                last_step: self.last,
+                fluxes: self.boundaries.iter().map(|b| b.flux).collect(),
+                params: self.params.clone(),
+                boundaries: self.boundaries.iter().map(|b| b.spec.clone()).collect(),
+            },
+            particles: self.particles.clone(),
+        }
+    }
+
+    /// Continues a run from `ckpt` with `params`, `boundaries` and `motions`. The open boundaries
+    /// must be those the checkpoint was written with (same names, in order): the reservoir particles
+    /// refer to them. Parameters may differ (e.g. a finer output schedule or another thread
+    /// setting); [`Checkpoint`] users can list the differences with [`CheckpointHeader::params`].
+    pub fn from_checkpoint(
+        params: SphParams,
+        ckpt: Checkpoint,
+        boundaries: Vec<OpenBoundary>,
+        motions: &[WallMotion],
+    ) -> Result<Self, SphError> {
+        let names: Vec<&str> = boundaries.iter().map(|b| b.name.as_str()).collect();
+        let saved: Vec<&str> = ckpt.header.boundaries.iter().map(|b| b.name.as_str()).collect();
+        if names != saved {
+            return Err(SphError::State(format!(
+                "the checkpoint was written with open boundaries {saved:?}, this run has {names:?}"
+            )));
+        }
+        let h = ckpt.header;
+        let mut s = Solver::new(params, ckpt.particles, h.time)?
+            .with_open_boundaries(boundaries)?
+            .with_wall_motions(motions)?;
+        for (b, f) in s.boundaries.iter_mut().zip(&h.fluxes) {
+            b.flux = *f;
+        }
+        s.steps = h.steps;
+        s.first_dt = h.first_dt;
+        s.last = h.last_step;
+        s.next_id = s.next_id.max(h.next_id);
+        Ok(s)
     }
 
     /// Adds the anti-penetration guard: after every step a fluid particle found outside `domain`

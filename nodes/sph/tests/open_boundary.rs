@@ -166,3 +166,42 @@ fn oscillating_flow_reverses_through_both_reservoirs_and_follows_womersley() {
     assert!(inl.removed > 0 && outl.created > 0);
     assert!((d.n_fluid as Real / n_fluid0 as Real - 1.0).abs() < 0.03, "{n_fluid0} -> {}", d.n_fluid);
 }
+
+#[test]
+fn a_run_continued_from_a_checkpoint_is_bit_identical_and_bad_files_are_refused() {
+    let w = WaveformSpec::Cosine { amplitude: 0.02, period: 0.2, phase: 0.3, offset: 0.005 }.build().expect("ok");
+    let (cfg, mut a) = channel(w, true);
+    a.advance_to(0.01).expect("ok");
+    let dir = std::env::temp_dir().join(format!("sonoflow-sph-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("state.ckpt");
+    a.checkpoint().write(&path).expect("write");
+    assert!(!path.with_extension("tmp").exists(), "temporary file renamed away");
+    let ck = sonoflow_sph::Checkpoint::read(&path).expect("read");
+    assert_eq!(ck.header.time, 0.01);
+    let params = a.params().clone();
+    let mut b = Solver::from_checkpoint(params.clone(), ck, cfg.boundaries(), &[]).expect("resume");
+    a.advance_to(0.02).expect("ok");
+    b.advance_to(0.02).expect("ok");
+    assert_eq!(a.particles, b.particles, "continued run differs");
+    assert_eq!(a.diagnostics(), b.diagnostics());
+    // other boundaries → refused; truncated / corrupted / foreign files → clear errors
+    let ck = sonoflow_sph::Checkpoint::read(&path).expect("read");
+    let e = Solver::from_checkpoint(params, ck, cfg.boundaries()[..1].to_vec(), &[]).expect_err("mismatch");
+    assert!(e.to_string().contains("open boundaries"), "{e}");
+    let bytes = std::fs::read(&path).expect("read");
+    let short = dir.join("short.ckpt");
+    std::fs::write(&short, &bytes[..bytes.len() / 2]).expect("write");
+    let e = sonoflow_sph::Checkpoint::read(&short).expect_err("truncated");
+    assert!(e.to_string().contains("truncated or corrupted"), "{e}");
+    let mut flipped = bytes.clone();
+    flipped[bytes.len() / 3] ^= 0x40;
+    let bad = dir.join("flipped.ckpt");
+    std::fs::write(&bad, &flipped).expect("write");
+    assert!(sonoflow_sph::Checkpoint::read(&bad).expect_err("corrupt").to_string().contains("checksum"));
+    std::fs::write(&bad, b"hello world, not a checkpoint at all").expect("write");
+    assert!(sonoflow_sph::Checkpoint::read(&bad).expect_err("foreign").to_string().contains("bad magic"));
+    let e = sonoflow_sph::Checkpoint::read(&dir.join("missing.ckpt")).expect_err("missing");
+    assert!(e.to_string().contains("missing.ckpt"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
