@@ -119,6 +119,27 @@ fn steady_inflow_gives_the_poiseuille_profile_and_balanced_mass_flux() {
     assert!(inl.created > 0 && outl.removed > 0);
     assert_eq!(s.next_id(), next0 + inl.created + outl.created, "every created particle got a fresh id");
     assert_ids_unique_and_particles_inside(&s, &cfg);
+    // SPH interpolation of the velocity field (ground truth on an imaging grid): a cross-section at
+    // mid-length, 41 points from wall to wall.
+    let xm = 0.5 * cfg.length();
+    let zs: Vec<Real> = (0..=40).map(|k| k as Real / 40.0 * cfg.width).collect();
+    let xs = vec![xm; zs.len()];
+    let f = s.sample_velocity(&xs, &zs);
+    let mut worst: Real = 0.0;
+    for (k, (&z, v)) in zs.iter().zip(&f).enumerate() {
+        let exact = 1.5 * u_mean * (1.0 - ((z - a) / a).powi(2));
+        if (4..=36).contains(&k) {
+            worst = worst.max((v[0] - exact).abs() / umax);
+            assert!((v[2] - 1.0).abs() < 0.02, "fluid fraction {} at z = {z}", v[2]);
+        }
+        assert!(v[1].abs() < 0.02 * umax, "vz {} at z = {z}", v[1]);
+    }
+    eprintln!("sampled profile: E_inf {:.2} % of u_max (interior), wall value {:.2e}, wall fluid fraction {:.2}", 100.0 * worst, f[0][0], f[0][2]);
+    assert!(worst < 0.02, "{worst}");
+    assert!(f[0][0].abs() < 0.02 * umax && f[40][0].abs() < 0.02 * umax, "no slip: {} {}", f[0][0], f[40][0]);
+    // the first fluid row lies one spacing from the wall (type I particles on it), so at the wall
+    // itself the fluid fraction is ≈ 1/4, and 1/2 about half a spacing inside
+    assert!((0.15..0.4).contains(&f[0][2]), "fluid fraction at the wall {}", f[0][2]);
 }
 
 #[test]
