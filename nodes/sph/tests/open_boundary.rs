@@ -134,7 +134,12 @@ fn steady_inflow_gives_the_poiseuille_profile_and_balanced_mass_flux() {
         }
         assert!(v[1].abs() < 0.02 * umax, "vz {} at z = {z}", v[1]);
     }
-    eprintln!("sampled profile: E_inf {:.2} % of u_max (interior), wall value {:.2e}, wall fluid fraction {:.2}", 100.0 * worst, f[0][0], f[0][2]);
+    eprintln!(
+        "sampled profile: E_inf {:.2} % of u_max (interior), wall value {:.2e}, wall fluid fraction {:.2}",
+        100.0 * worst,
+        f[0][0],
+        f[0][2]
+    );
     assert!(worst < 0.02, "{worst}");
     assert!(f[0][0].abs() < 0.02 * umax && f[40][0].abs() < 0.02 * umax, "no slip: {} {}", f[0][0], f[40][0]);
     // the first fluid row lies one spacing from the wall (type I particles on it), so at the wall
