@@ -15,17 +15,19 @@ pub enum MessageKind {
     DopplerMapV1,
     VectorFieldV1,
     StageStatsV1,
+    FlowStatsV1,
 }
 
 impl MessageKind {
     /// All kinds.
-    pub const ALL: [MessageKind; 6] = [
+    pub const ALL: [MessageKind; 7] = [
         MessageKind::ParticleSnapshotV1,
         MessageKind::RfFrameV1,
         MessageKind::IqFrameV1,
         MessageKind::DopplerMapV1,
         MessageKind::VectorFieldV1,
         MessageKind::StageStatsV1,
+        MessageKind::FlowStatsV1,
     ];
 
     /// Name used in launch files and MCAP channel metadata.
@@ -37,6 +39,7 @@ impl MessageKind {
             MessageKind::DopplerMapV1 => "DopplerMapV1",
             MessageKind::VectorFieldV1 => "VectorFieldV1",
             MessageKind::StageStatsV1 => "StageStatsV1",
+            MessageKind::FlowStatsV1 => "FlowStatsV1",
         }
     }
 
@@ -118,6 +121,7 @@ kind!(VectorField, VectorFieldV1, VectorFieldHeaderV1, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
 kind!(StageStats, StageStatsV1, StageStatsHeaderV1, u8, |_h| None);
+kind!(FlowStats, FlowStatsV1, FlowStatsHeaderV1, BoundaryFluxV1, |h| Some(h.n_boundaries as usize));
 
 /// Runs `$body` with `$M` bound to the marker type of `$kind` (monomorphised dispatch).
 #[macro_export]
@@ -146,6 +150,10 @@ macro_rules! with_kind {
             }
             $crate::MessageKind::StageStatsV1 => {
                 type $M = $crate::kinds::StageStats;
+                $body
+            }
+            $crate::MessageKind::FlowStatsV1 => {
+                type $M = $crate::kinds::FlowStats;
                 $body
             }
         }

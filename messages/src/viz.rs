@@ -102,7 +102,7 @@ pub fn viz(kind: MessageKind, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageKind::RfFrameV1 | MessageKind::StageStatsV1 => None,
+        MessageKind::RfFrameV1 | MessageKind::StageStatsV1 | MessageKind::FlowStatsV1 => None,
     }
 }
 

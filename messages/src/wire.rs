@@ -280,3 +280,61 @@ wire_struct! {
         pub bytes_out: u64,
     }
 }
+
+/// `FlowStatsHeaderV1::binding`: acoustic CFL criterion.
+pub const DT_CFL: u32 = 0;
+/// `FlowStatsHeaderV1::binding`: viscous criterion.
+pub const DT_VISCOUS: u32 = 1;
+/// `FlowStatsHeaderV1::binding`: force criterion.
+pub const DT_FORCE: u32 = 2;
+/// `FlowStatsHeaderV1::binding`: `dt_max`.
+pub const DT_MAXIMUM: u32 = 3;
+/// `FlowStatsHeaderV1::binding`: shortened to land on an output time.
+pub const DT_OUTPUT: u32 = 4;
+
+wire_struct! {
+    /// Diagnostics of a particle flow solver (SPH), one message per output time. Payload: one
+    /// [`BoundaryFluxV1`] per open boundary, in the scene's order.
+    pub struct FlowStatsHeaderV1 as "sonoflow_msgs/FlowStatsHeaderV1" {
+        pub common: MsgHeaderV1,
+        /// Time step of the last step (s).
+        pub dt: f64,
+        /// Steps taken since the start (of the run or of the checkpoint's run).
+        pub steps: u64,
+        /// max |ρ/ρ₀ − 1| over the fluid particles.
+        pub max_density_error: f64,
+        /// Kinetic energy of the fluid ½ Σ m |u|² (J per metre of depth).
+        pub kinetic_energy: f64,
+        /// Mass of the fluid (kg per metre of depth).
+        pub fluid_mass: f64,
+        /// Largest fluid speed (m/s).
+        pub max_speed: f64,
+        /// Smallest distance between a fluid particle and any other particle (m).
+        pub min_pair_distance: f64,
+        /// Times the anti-penetration guard put a particle back inside.
+        pub guard_corrections: u64,
+        /// CPU time of the solver since the start of the run (ns).
+        pub solver_cpu_ns: u64,
+        pub n_fluid: u32,
+        pub n_buffer: u32,
+        pub n_wall: u32,
+        /// `DT_*`: the criterion that limited the last step.
+        pub binding: u32,
+        pub n_boundaries: u32,
+        pub reserved: u32,
+    }
+}
+
+wire_struct! {
+    /// Mass bookkeeping of one open boundary since the start (kg per metre of depth).
+    pub struct BoundaryFluxV1 as "sonoflow_msgs/BoundaryFluxV1" {
+        /// Mass that entered the domain through the opening.
+        pub mass_in: f64,
+        /// Mass that left the domain through the opening.
+        pub mass_out: f64,
+        /// Particles created at the far side of the reservoir.
+        pub created: u64,
+        /// Particles removed beyond the far side of the reservoir.
+        pub removed: u64,
+    }
+}

@@ -17,6 +17,8 @@ fn sizes_are_pinned() {
     assert_eq!(size_of::<DopplerMapHeaderV1>(), 200);
     assert_eq!(size_of::<VectorFieldHeaderV1>(), 168);
     assert_eq!(size_of::<StageStatsHeaderV1>(), 128);
+    assert_eq!(size_of::<FlowStatsHeaderV1>(), 160);
+    assert_eq!(size_of::<BoundaryFluxV1>(), 32);
     for k in MessageKind::ALL {
         // CDR needs every header to be a multiple of 8 so the u32 count is 4-aligned and
         // the payload starts on its natural alignment.
@@ -52,6 +54,10 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(DopplerMapHeaderV1, plane_ids), 168);
     assert_eq!(offset_of!(VectorFieldHeaderV1, plane_ids), 136);
     assert_eq!(offset_of!(StageStatsHeaderV1, messages_in), 72);
+    assert_eq!(offset_of!(FlowStatsHeaderV1, dt), 64);
+    assert_eq!(offset_of!(FlowStatsHeaderV1, guard_corrections), 120);
+    assert_eq!(offset_of!(FlowStatsHeaderV1, n_fluid), 136);
+    assert_eq!(offset_of!(FlowStatsHeaderV1, n_boundaries), 152);
 }
 
 /// The generated ROS 2 schema lists the fields in struct order with the right types; the sum
