@@ -15,9 +15,12 @@
 //! * [`waveform`]: periodic waveforms (Fourier series; the synthetic carotid inlet waveform).
 //! * [`womersley`]: 2D channel Womersley solutions (validation reference and imposed inlet profile).
 //! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
+//! * [`geometry`]: 2D vessel geometries (branches, openings; straight tube, stenosis, carotid
+//!   bifurcation presets) and their initial particle set (fluid lattice, wall particles, reservoirs).
 
 pub mod analytic;
 pub mod boundary;
+pub mod geometry;
 pub mod kernel;
 pub mod neighbours;
 pub mod params;
