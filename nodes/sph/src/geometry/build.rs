@@ -396,7 +396,7 @@ pub(super) fn build(geom: &VesselGeometry, opts: &BuildOptions) -> Result<Vessel
                     // the far side (level 0 there and the layers' caps beyond it) …
                     let beyond_far_side = s > depth + TIE * dx && s < far && y.abs() < o.half_width + far - depth;
                     // … and anything across the opening's strip
-                    let across = s > 0.0 && s < far && y.abs() < o.half_width - 0.25 * dx;
+                    let across = s > 0.0 && s < far && y.abs() < o.half_width - 1e-3 * dx;
                     beyond_far_side || across
                 });
                 if clipped {

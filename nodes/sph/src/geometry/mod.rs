@@ -118,9 +118,11 @@ impl Diameter {
     }
 }
 
-/// What happens at one end of a branch.
+/// What happens at one end of a branch. Written as a table with a `type` (`closed`, `inlet`,
+/// `outlet`) and, for an outlet only, `flow_fraction`; any other key is rejected (also on `closed`
+/// and `inlet`, which serde's internally tagged unit variants would silently accept).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(try_from = "BranchEndRepr", into = "BranchEndRepr")]
 pub enum BranchEnd {
     /// Rounded cap (the disk of the end point); also a branch starting inside another one.
     Closed,
@@ -132,6 +134,50 @@ pub enum BranchEnd {
         /// all outlets sum to 1.
         flow_fraction: Real,
     },
+}
+
+/// The written form of a [`BranchEnd`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BranchEndRepr {
+    #[serde(rename = "type")]
+    kind: EndKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    flow_fraction: Option<Real>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+enum EndKind {
+    Closed,
+    Inlet,
+    Outlet,
+}
+
+impl TryFrom<BranchEndRepr> for BranchEnd {
+    type Error = String;
+
+    fn try_from(r: BranchEndRepr) -> Result<Self, String> {
+        match (r.kind, r.flow_fraction) {
+            (EndKind::Closed, None) => Ok(BranchEnd::Closed),
+            (EndKind::Inlet, None) => Ok(BranchEnd::Inlet),
+            (EndKind::Outlet, Some(flow_fraction)) => Ok(BranchEnd::Outlet { flow_fraction }),
+            (EndKind::Outlet, None) => Err("an outlet needs `flow_fraction` (its share of the inlet flow)".into()),
+            (_, Some(_)) => Err("`flow_fraction` is only allowed on an outlet".into()),
+        }
+    }
+}
+
+impl From<BranchEnd> for BranchEndRepr {
+    fn from(e: BranchEnd) -> Self {
+        match e {
+            BranchEnd::Closed => BranchEndRepr { kind: EndKind::Closed, flow_fraction: None },
+            BranchEnd::Inlet => BranchEndRepr { kind: EndKind::Inlet, flow_fraction: None },
+            BranchEnd::Outlet { flow_fraction } => {
+                BranchEndRepr { kind: EndKind::Outlet, flow_fraction: Some(flow_fraction) }
+            }
+        }
+    }
 }
 
 impl BranchEnd {
