@@ -44,14 +44,15 @@ fn coverage(scene: &VesselScene) -> Vec<(usize, Real, Real, Real)> {
         .collect()
 }
 
-fn min_pair_distance(scene: &VesselScene) -> Real {
+/// Smallest distance between two particles whose kinds both pass `among`.
+fn min_pair_distance(scene: &VesselScene, among: impl Fn(ParticleKind) -> bool) -> Real {
     let p = &scene.particles;
     let mut cells = CellList::default();
     cells.build(&p.x, &p.z, scene.dx, None);
     let mut best = Real::INFINITY;
-    for a in 0..p.len() {
+    for a in (0..p.len()).filter(|&a| among(p.kind[a])) {
         cells.for_each_neighbour(p.x[a], p.z[a], &p.x, &p.z, |b, _, _, r2| {
-            if b != a {
+            if b != a && among(p.kind[b]) {
                 best = best.min(r2.sqrt());
             }
         });
@@ -195,7 +196,7 @@ fn tilted_tube_keeps_every_particle_in_its_band_and_none_crowd() {
             ParticleKind::Buffer => assert!(f > 0.0 && ext < 0.0),
         }
     }
-    let dmin = min_pair_distance(&scene);
+    let dmin = min_pair_distance(&scene, |_| true);
     println!("tilted tube: min pair distance {:.4} dx, {} particles", dmin / DX, p.len());
     assert!(dmin >= 0.5 * DX * (1.0 - 1e-6), "{}", dmin / DX);
     // the openings are not axis-aligned: not snapped, at the centre-line ends
@@ -242,9 +243,24 @@ fn carotid_has_no_hole_in_the_kernel_support() {
     assert!(below * 200 < cov.len(), "{below} below 0.9");
     // no crowding: fluid ≥ dx/2 from everything; the reservoir lanes (dy = 2a / round(2a/dx)) may come
     // dy/2 < dx/2 close to the wall where 2a/dx is not an integer (internal: 18.5 → dy = 0.974 dx)
-    let dmin = min_pair_distance(&scene);
-    println!("  min pair distance {:.4} dx", dmin / scene.dx);
+    let dmin = min_pair_distance(&scene, |_| true);
+    let wmin = min_pair_distance(&scene, |k| k.is_wall());
+    println!("  min pair distance {:.4} dx (walls among themselves {:.4} dx)", dmin / scene.dx, wmin / scene.dx);
     assert!(dmin >= 0.48 * scene.dx, "{}", dmin / scene.dx);
+    assert!(wmin >= 0.5 * scene.dx * (1.0 - 1e-9), "{}", wmin / scene.dx);
+    // walls on their level sets everywhere, the carina's V-shaped layers included
+    let p = &scene.particles;
+    let (mut on, mut out): (Real, Real) = (0.0, 0.0);
+    for i in 0..p.len() {
+        let f = scene.lumen.signed_distance_with_reservoirs(p.x[i], p.z[i]) / scene.dx;
+        match p.kind[i] {
+            ParticleKind::WallOn => on = on.max(f.abs()),
+            ParticleKind::WallOutside => out = out.max((f - f.round()).abs()),
+            _ => {}
+        }
+    }
+    println!("  walls off their level: type I {on:.2e} dx, type II {out:.2e} dx");
+    assert!(on < 1e-3 && out < 0.05);
     // next to the openings (within 2 dx of the opening line) the reservoirs continue the lattice
     for b in &scene.boundaries {
         let near: Vec<Real> = cov
@@ -311,13 +327,22 @@ fn carotid_preset_has_the_papers_numbers() {
         let hw: Vec<Real> = s.boundaries.iter().map(|b| b.half_width).collect();
         assert_eq!(hw, [4e-3, 2.775e-3, 2.325e-3]);
     }
-    // the flow divider: the internal and external lumens are separated by more than 4 walls' worth
-    // of layers (4 × 3 dx) 10 mm downstream of the branches' start
-    let zs: Vec<Real> =
-        (0..2000).map(|k| 0.012 + k as Real * 1e-5).filter(|&z| fine.lumen.signed_distance(0.01, z) > 0.0).collect();
-    let gap = zs.iter().filter(|&&z| z > 0.019 && z < 0.027).count() as Real * 1e-5;
-    println!("lumen-free gap between internal and external at x = 10 mm: {:.2} mm", gap * 1e3);
-    assert!(gap > 12.0 * 0.15e-3, "{gap}");
+    // the flow divider (carina): its apex near x = 0, then the wall between the internal and
+    // external lumens (counted for z in [20, 25] mm) thickens quickly (> 2 × 4 layers of 0.15 mm
+    // within 2 mm of the apex)
+    let solid = |x: Real| -> Real {
+        (0..500).filter(|k| fine.lumen.signed_distance(x, 0.02 + *k as Real * 1e-5) > 0.0).count() as Real * 1e-5
+    };
+    let apex = (0..2000).map(|k| -0.005 + k as Real * 1e-5).find(|&x| solid(x) > 0.0).expect("a carina");
+    let (t1, t2, t10) = (solid(apex + 1e-3), solid(apex + 2e-3), solid(0.01));
+    println!(
+        "carina apex at x = {:.2} mm; wall between the daughters {:.2} / {:.2} / {:.2} mm at 1 / 2 mm past it and at x = 10 mm",
+        apex * 1e3,
+        t1 * 1e3,
+        t2 * 1e3,
+        t10 * 1e3
+    );
+    assert!(apex.abs() < 2e-3 && t2 > 8.0 * 0.15e-3 && t10 > 4.9e-3, "{apex} {t2} {t10}");
 }
 
 #[test]
@@ -576,5 +601,5 @@ fn builds_are_deterministic_serial_or_parallel() {
     let area = 8e-3 * D + std::f64::consts::PI * 0.25 * D * D;
     assert!((s.lumen_area / area - 1.0).abs() < 1e-3, "{} vs {area}", s.lumen_area);
     assert!(s.count(ParticleKind::Fluid) > 0 && s.count(ParticleKind::WallOn) > 0);
-    assert!(min_pair_distance(&s) >= 0.5 * DX * (1.0 - 1e-6));
+    assert!(min_pair_distance(&s, |_| true) >= 0.5 * DX * (1.0 - 1e-6));
 }
