@@ -335,9 +335,11 @@ fn carotid_preset_has_the_papers_numbers() {
     };
     let apex = (0..2000).map(|k| -0.005 + k as Real * 1e-5).find(|&x| solid(x) > 0.0).expect("a carina");
     let (t1, t2, t10) = (solid(apex + 1e-3), solid(apex + 2e-3), solid(0.01));
+    let apex_z = (0..500).map(|k| 0.02 + k as Real * 1e-5).find(|&z| fine.lumen.signed_distance(apex, z) > 0.0);
     println!(
-        "carina apex at x = {:.2} mm; wall between the daughters {:.2} / {:.2} / {:.2} mm at 1 / 2 mm past it and at x = 10 mm",
+        "carina apex at x = {:.2} mm, z = {:.2} mm; wall between the daughters {:.2} / {:.2} / {:.2} mm at 1 / 2 mm past it and at x = 10 mm",
         apex * 1e3,
+        apex_z.unwrap_or(Real::NAN) * 1e3,
         t1 * 1e3,
         t2 * 1e3,
         t10 * 1e3

@@ -88,8 +88,9 @@ fn path(start: [Real; 2], heading: Real, pieces: &[(Real, Real)]) -> (Vec<[Real;
     (pts, arc)
 }
 
-/// Length of the straight piece at ±25° of the internal / external centre-lines \[mm\].
+/// Length of the straight piece at −25° of the internal centre-line \[mm\].
 const ICA_STRAIGHT: Real = 4.58765;
+/// Length of the straight piece at +25° of the external centre-line \[mm\].
 const ECA_STRAIGHT: Real = 4.29188;
 
 /// Smooth step 0 → 1 over [a, b] (cosine).
@@ -106,25 +107,32 @@ fn blend(s: Real, a: Real, b: Real) -> Real {
 /// The 2D carotid bifurcation of Shahriari & Garcia (2018, §2.2; diameters of Zhao et al. 2003):
 /// common carotid (CCA) 8 mm, internal (ICA) 5.55 mm with a carotid bulb, external (ECA) 4.65 mm,
 /// outlet split 54 % ICA / 46 % ECA. Flow from left to right; the probe is at z = 0 and images
-/// x ∈ [−19, 19] mm; the bifurcation is near x = 0 at depth 22 mm and about 19 mm of each daughter
-/// branch lies in that window. Lengths are chosen so that the lumen holds ≈ 26 000 fluid particles on
-/// a 0.15 mm lattice (the paper's count).
+/// x ∈ [−19, 19] mm; the flow divider (carina) apex is at x ≈ 0.2 mm, z ≈ 23.1 mm, and 19 mm of each
+/// daughter branch lies in that window. Lengths are chosen so that the lumen holds ≈ 26 000 fluid
+/// particles on a 0.15 mm lattice (the paper's count): 26 249 at dx = 0.15 mm, 6 476 at 0.3 mm
+/// (lattice through the origin).
 ///
 /// Every number (mm, degrees):
-/// * **common** (inlet → closed): centre-line z = 22 from x = −37 (inlet) to x = −6 (closed end: its
-///   rounded cap reaches x = −2), diameter 8. Walls at z = 18 and z = 26.
-/// * **internal** (closed → outlet, flow fraction 0.54): starts at (−9, 21.2) with heading 0 (its
-///   upper wall then coincides with the CCA's upper wall z = 18), then: 2 straight; arc turning 25°
-///   towards the probe (−z) over 6; 4 straight at −25°; arc turning back by 25° over 8; straight to
-///   x = 25 (outlet, normal +x). Diameter: 6.4 at the start, a cosine rise to the bulb maximum 7.0 at
-///   arc length 5, a cosine taper to 5.55 at arc length 18, 5.55 beyond.
-/// * **external** (closed → outlet, flow fraction 0.46): starts at (−9, 23.675) with heading 0 (its
-///   lower wall coincides with the CCA's lower wall z = 26), then the mirror image of the internal
-///   centre-line (turning +25°, away from the probe, and back), straight to x = 25. Diameter 4.65.
+/// * **common** (inlet → closed): centre-line z = 22.05 from x = −40.5 (inlet, normal −x) to x = −6
+///   (closed end: its rounded cap reaches x = −2), diameter 8; walls at z = 18.05 and 26.05.
+/// * **internal** (closed → outlet, flow fraction 0.54): starts at (−9, 21.25) with heading 0 (its
+///   upper wall then runs along the CCA's upper wall), then: 2 straight; an arc turning 25° towards
+///   the probe (−z) over 6; 4.58765 straight at −25°; an arc turning back by 25° over 8; straight to
+///   x = 25 (outlet, normal +x, centre z = 16.305). Arcs are sampled by chords of 5°. Diameter: 6.4
+///   at the start, a cosine rise to the bulb maximum 7.0 at arc length 5, a cosine taper to 5.55 at
+///   arc length 18, 5.55 beyond.
+/// * **external** (closed → outlet, flow fraction 0.46): starts at (−9, 23.725) with heading 0 (its
+///   lower wall runs along the CCA's lower wall), then the mirror image of the internal centre-line
+///   (turning 25° away from the probe and back) with a 4.29188 straight, straight to x = 25 (outlet,
+///   normal +x, centre z = 28.545). Diameter 4.65.
 ///
-/// The daughters' outlets are parallel to x (normal +x), so their reservoirs snap to the lattice; the
-/// inlet normal is −x. The flow divider (carina) is where the internal branch's lower wall meets the
-/// external branch's upper wall, past the CCA's cap.
+/// The three openings are axis-aligned, so their reservoirs snap to the lattice. The odd decimals
+/// place the straight walls (CCA, the daughters' outlet parts) so that the first lattice row inside
+/// lies 0.6–0.9 dx from them at both dx = 0.15 and 0.3 mm (lattice through the origin): there the
+/// kernel sum of a fluid particle is 1.0–1.2 (a row at the worst offset, 1.5 dx, sees 0.835; see
+/// [`super::VesselGeometry::build`]). The carina is the sharp corner where the internal branch's
+/// lower wall meets the external branch's upper wall, past the CCA's cap; the wall between the
+/// daughters is 1 mm thick 1 mm past the apex, 2 mm at 2 mm, 7 mm at x = 10.
 pub fn carotid_bifurcation() -> VesselGeometry {
     let mm = 1e-3;
     let deg = std::f64::consts::PI / 180.0;
