@@ -605,3 +605,37 @@ fn builds_are_deterministic_serial_or_parallel() {
     assert!(s.count(ParticleKind::Fluid) > 0 && s.count(ParticleKind::WallOn) > 0);
     assert!(min_pair_distance(&s, |_| true) >= 0.5 * DX * (1.0 - 1e-6));
 }
+
+#[test]
+fn far_side_clipping_keeps_the_walls_of_other_branches() {
+    // a closed capsule standing 2 dx beyond the outlet reservoir's far side, across its strip
+    let o = opts(DX);
+    let tube = aligned_tube().build(&o).expect("valid");
+    let x_far = tube.boundaries[1].origin[0] + tube.reservoir_depth;
+    let capsule = sonoflow_sph::geometry::Branch {
+        name: "capsule".into(),
+        centreline: vec![[x_far + 2.0 * DX + 0.5e-3, 50.5 * DX - 3e-3], [x_far + 2.0 * DX + 0.5e-3, 50.5 * DX + 3e-3]],
+        diameter: Diameter::Constant(1e-3),
+        start: BranchEnd::Closed,
+        end: BranchEnd::Closed,
+    };
+    let mut both = aligned_tube();
+    both.branches.push(capsule.clone());
+    let scene = both.build(&o).expect("valid");
+    let alone = VesselGeometry { branches: vec![capsule] }.build(&o).expect("valid");
+    let on_capsule = |s: &VesselScene| {
+        let p = &s.particles;
+        (0..p.len())
+            .filter(|&i| {
+                p.kind[i] == ParticleKind::WallOn && alone.lumen.signed_distance(p.x[i], p.z[i]).abs() < 1e-3 * DX
+            })
+            .count()
+    };
+    assert_eq!(on_capsule(&scene), on_capsule(&alone));
+    assert!(on_capsule(&alone) > 30);
+    // and the tube's own far side is still open
+    let zc = 50.5 * DX;
+    let p = &scene.particles;
+    assert!((0..p.len())
+        .all(|i| !p.kind[i].is_wall() || p.x[i] > x_far + 1.5 * DX || (p.z[i] - zc).abs() >= 0.5 * D - 1e-3 * DX));
+}

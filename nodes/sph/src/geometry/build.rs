@@ -372,7 +372,12 @@ pub(super) fn build(geom: &VesselGeometry, opts: &BuildOptions) -> Result<Vessel
                 far = k;
             }
         }
-        far as Real // ±1 m: beyond every level, the sign is all that matters
+        // beyond every level (far above all, or below level 0): only the side matters
+        if far > 0 {
+            top + 2.0 * margin
+        } else {
+            -2.0 * margin
+        }
     });
     let fine = SdfGrid { origin: g0, spacing: h, nx, nz, values: fine_values };
 
@@ -392,12 +397,14 @@ pub(super) fn build(geom: &VesselGeometry, opts: &BuildOptions) -> Result<Vessel
                 let p = project(&ext, p, level, dx);
                 let clipped = openings.iter().any(|o| {
                     let (s, y) = o.local(p[0], p[1]);
-                    let far = depth + (layers as Real + 2.0) * dx;
-                    // the far side (level 0 there and the layers' caps beyond it) …
-                    let beyond_far_side = s > depth + TIE * dx && s < far && y.abs() < o.half_width + far - depth;
-                    // … and anything across the opening's strip
-                    let across = s > 0.0 && s < far && y.abs() < o.half_width - 1e-3 * dx;
-                    beyond_far_side || across
+                    let tol = 1e-6 * dx;
+                    // this reservoir's far side and its offsets: points of this reservoir's level
+                    // sets (max(|y| − a, s − depth) = level) beyond the far side; walls of other
+                    // branches nearby are closer to something else and stay
+                    let far_side = s > depth + tol && (y.abs() - o.half_width).max(s - depth) <= level + tol;
+                    // … and anything inside the opening's strip (level 0 on the far side)
+                    let across = s > 0.0 && s <= depth + tol && y.abs() < o.half_width - 1e-3 * dx;
+                    far_side || across
                 });
                 if clipped {
                     continue;
