@@ -4,6 +4,7 @@
 //! optionally writes the particles as CSV (x, z, vx, vz, kind, group).
 //!
 //! `cargo run --release -p sonoflow-sph --example vessel_geometry -- [dx_mm] [out.csv] [geometry.toml]`
+//! (`PRINT_GEOMETRY=1` also prints the geometry as TOML).
 
 use std::io::Write;
 use std::time::Instant;
@@ -18,6 +19,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(path) => toml::from_str::<VesselGeometry>(&std::fs::read_to_string(path)?)?,
         None => carotid_bifurcation(),
     };
+    if std::env::var("PRINT_GEOMETRY").is_ok() {
+        println!("{}", toml::to_string(&geom)?);
+    }
     let h = 1.2 * dx;
     let opts =
         BuildOptions { dx, support: 2.5 * h, initial_velocity: InitialVelocity::FullyDeveloped, ..Default::default() };

@@ -62,8 +62,8 @@ pub struct BuildOptions {
     pub t0: Real,
     /// A node of the fluid lattice \[m\] (x, z); the lattice is lattice_origin + (i, j)·dx. An opening
     /// whose normal is along x or z is moved along its normal (by < dx/2) so that the lattice rows lie
-    /// at s = −dx/2 − k dx from it and the reservoir's first row at s = ds/2 continues the lattice.
-    /// Default (0, 0).
+    /// at s = −dx/2 − k dx from it and the reservoir's first row at s = ds/2 continues the lattice
+    /// (an end point exactly on a lattice line moves away from the origin's line). Default (0, 0).
     pub lattice_origin: [Real; 2],
     /// Sample the grids on rayon threads (feature `parallel`; the same result either way). Default true.
     pub parallel: bool,

@@ -136,12 +136,12 @@ fn blend(s: Real, a: Real, b: Real) -> Real {
 pub fn carotid_bifurcation() -> VesselGeometry {
     let mm = 1e-3;
     let deg = std::f64::consts::PI / 180.0;
-    let z_axis = 22.05 * mm;
+    let z_axis = 22.05e-3;
     let r_cca = 4e-3;
-    let x_in = -40.5 * mm;
-    let x_cca_end = -6.0 * mm;
-    let x_daughter = -9.0 * mm;
-    let x_out = 25.0 * mm;
+    let x_in = -40.5e-3;
+    let x_cca_end = -6e-3;
+    let x_daughter = -9e-3;
+    let x_out = 25e-3;
     let (d_start, d_bulb, d_ica, d_eca) = (6.4e-3, 7e-3, 5.55e-3, 4.65e-3);
     let (s_bulb, s_taper) = (5.0 * mm, 18.0 * mm);
     let turn = 25.0 * deg;
