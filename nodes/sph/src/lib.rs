@@ -17,10 +17,13 @@
 //! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
 //! * [`checkpoint`]: the solver state in one checked file (start from a saved state).
 //! * [`walls`]: prescribed wall motion and the fluid domain of the anti-penetration guard.
+//! * [`geometry`]: 2D vessel geometries (branches, openings; straight tube, stenosis, carotid
+//!   bifurcation presets) and their initial particle set (fluid lattice, wall particles, reservoirs).
 
 pub mod analytic;
 pub mod boundary;
 pub mod checkpoint;
+pub mod geometry;
 pub mod kernel;
 pub mod neighbours;
 pub mod params;
