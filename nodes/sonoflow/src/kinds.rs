@@ -73,6 +73,19 @@ static KINDS: &[KindSpec] = &[
         run: crate::node_flow::run,
     },
     KindSpec {
+        name: "sph-flow",
+        about: "weakly compressible SPH blood flow (paper 1 §2.1–2.2) in a vessel geometry (carotid bifurcation preset): fluid particles = scatterers at the acquisition times, SPH-interpolated ground truth, solver diagnostics",
+        ports: &[
+            port("particles", Out, ParticleSnapshotV1, true),
+            port("truth", Out, VectorFieldV1, false),
+            port("stats", Out, FlowStatsV1, false),
+        ],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_sph::validate,
+        run: crate::node_sph::run,
+    },
+    KindSpec {
         name: "simus",
         about: "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
         ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV1, true)],

@@ -13,6 +13,7 @@ pub mod node_recorder;
 pub mod node_regularise;
 pub mod node_replay;
 pub mod node_simus;
+pub mod node_sph;
 pub mod node_test;
 pub mod nodeutil;
 pub mod npy;

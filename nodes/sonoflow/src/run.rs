@@ -169,12 +169,19 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
             }
         }
         if let Program::Builtin(k) = &n.program {
-            if k == "replay" {
-                if let Some(p) = params.get("path").and_then(|v| v.as_str()).map(String::from) {
+            // input files: relative to the launch file's folder when found there (nodes run in the
+            // run folder)
+            let key = match k.as_str() {
+                "replay" => Some("path"),
+                "sph-flow" => Some("checkpoint_in"),
+                _ => None,
+            };
+            if let Some(key) = key {
+                if let Some(p) = params.get(key).and_then(|v| v.as_str()).map(String::from) {
                     let cand = graph.base_dir.join(&p);
                     let abs = if Path::new(&p).is_absolute() || !cand.exists() { PathBuf::from(&p) } else { cand };
                     if let Some(obj) = params.as_object_mut() {
-                        obj.insert("path".into(), abs.display().to_string().into());
+                        obj.insert(key.into(), abs.display().to_string().into());
                     }
                 }
             }

@@ -75,6 +75,11 @@ pub struct SphParams {
     /// recirculation), at the price of moving particles — the acoustic scatterers — slightly off their
     /// material paths.
     pub shifting: Real,
+    /// ε of Monaghan's (2000) artificial pressure against the tensile instability: in eq 10 the term
+    /// (p_a/ρ_a² + p_b/ρ_b²) gets + (R_a + R_b)(W_ab/W(Δp))⁴ with R = ε|p|/ρ² for negative p (0 for
+    /// positive), Δp = √(m/ρ₀) the particle spacing. In \[0, 1\]; default 0 (the paper; 0.2 is
+    /// Monaghan's value). A force, so particles keep moving with the fluid velocity (unlike shifting).
+    pub tensile_correction: Real,
     /// Body force per unit mass (g_x, g_z) \[m/s²\]. Default (0, 0).
     pub body_force: [Real; 2],
     /// Time-dependent body force added to `body_force`. Default none.
@@ -112,6 +117,7 @@ impl Default for SphParams {
             viscous_constant: ViscousConstant::SecondMoment,
             density_diffusion: 0.0,
             shifting: 0.0,
+            tensile_correction: 0.0,
             body_force: [0.0, 0.0],
             body_force_pulsatile: None,
             periodic_x: None,
@@ -157,6 +163,8 @@ impl SphParams {
         check("mu", self.mu, self.mu >= 0.0, "mu >= 0 [Pa s]")?;
         let d = self.density_diffusion;
         check("density_diffusion", d, (0.0..=1.0).contains(&d), "0 <= density_diffusion <= 1")?;
+        let e = self.tensile_correction;
+        check("tensile_correction", e, (0.0..=1.0).contains(&e), "0 <= tensile_correction <= 1")?;
         check("shifting", self.shifting, (0.0..=10.0).contains(&self.shifting), "0 <= shifting <= 10")?;
         check("body_force[0]", self.body_force[0], true, "finite [m/s^2]")?;
         check("body_force[1]", self.body_force[1], true, "finite [m/s^2]")?;

@@ -41,6 +41,9 @@ pub struct Rate {
     pub grad_c: [Real; 2],
     /// Velocity gradient (∂u_x/∂x, ∂u_x/∂z, ∂u_z/∂x, ∂u_z/∂z) \[1/s\] (eq 6a; only with shifting).
     pub grad_u: [Real; 4],
+    /// The wall particles' part of `grad_c` \[1/m\]: points towards the wall; zero away from walls
+    /// (only with shifting; the shift is made tangential where it is non-zero).
+    pub grad_c_wall: [Real; 2],
 }
 
 /// Constant C of the mean-value viscous term (eq 12) for `kernel` (see [`ViscousConstant`]).
@@ -148,16 +151,20 @@ pub fn compute_rates(
     let delta_hc2 = 2.0 * params.density_diffusion * kernel.h * params.c;
     let diffusion = params.density_diffusion > 0.0;
     let shifting = params.shifting > 0.0;
+    let eps_t = params.tensile_correction;
+    let tensile = eps_t > 0.0;
     map_indices(params.parallel, n, &mut ws.rates, |a| {
         if kind[a].is_wall() {
             return Rate::default();
         }
         // W at the particle spacing Δp = √(m/ρ₀), for the anti-clumping term of the shifting gradient
-        let w_dp = if shifting { kernel.w((m[a] / params.rho0).sqrt()) } else { 1.0 };
+        let w_dp = if shifting || tensile { kernel.w((m[a] / params.rho0).sqrt()) } else { 1.0 };
         let (mut gcx, mut gcz) = (0.0, 0.0);
+        let (mut gwx, mut gwz) = (0.0, 0.0);
         let mut gu = [0.0; 4];
         let (uax, uaz, ra) = (ux[a], uz[a], rho[a]);
         let pa_term = p[a] / (ra * ra);
+        let ra_art = if p[a] < 0.0 { -eps_t * pa_term } else { 0.0 };
         let (mut drho, mut apx, mut apz) = (0.0, 0.0, 0.0);
         let (mut numx, mut numz, mut den) = (0.0, 0.0, m[a] / ra * w0);
         let (mut mvx, mut mvz) = (0.0, 0.0);
@@ -185,12 +192,24 @@ pub fn compute_rates(
                 let corr = vb * (1.0 + 0.2 * q2 * q2);
                 gcx += corr * gx;
                 gcz += corr * gz;
+                if kind[b].is_wall() {
+                    gwx += corr * gx;
+                    gwz += corr * gz;
+                }
                 gu[0] -= vb * dux * gx;
                 gu[1] -= vb * dux * gz;
                 gu[2] -= vb * duz * gx;
                 gu[3] -= vb * duz * gz;
             }
-            let pt = m[b] * (p[b] / (rb * rb) + pa_term);
+            let pbt = p[b] / (rb * rb);
+            let mut pt = m[b] * (pbt + pa_term);
+            if tensile {
+                // Monaghan (2000) artificial pressure R_ab (W_ab / W(Δp))⁴ against pairing under tension
+                let rb_art = if p[b] < 0.0 { -eps_t * pbt } else { 0.0 };
+                let f = wgt / w_dp;
+                let f2 = f * f;
+                pt += m[b] * (ra_art + rb_art) * f2 * f2;
+            }
             apx -= pt * gx;
             apz -= pt * gz;
             if mean_value {
@@ -210,6 +229,13 @@ pub fn compute_rates(
         } else {
             (mvx, mvz)
         };
-        Rate { drho, acc: [apx + avx + g[0], apz + avz + g[1]], r2min, grad_c: [gcx, gcz], grad_u: gu }
+        Rate {
+            drho,
+            acc: [apx + avx + g[0], apz + avz + g[1]],
+            r2min,
+            grad_c: [gcx, gcz],
+            grad_u: gu,
+            grad_c_wall: [gwx, gwz],
+        }
     });
 }

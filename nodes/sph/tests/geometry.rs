@@ -623,7 +623,7 @@ fn far_side_clipping_keeps_the_walls_of_other_branches() {
     let mut both = aligned_tube();
     both.branches.push(capsule.clone());
     let scene = both.build(&o).expect("valid");
-    let alone = VesselGeometry { branches: vec![capsule] }.build(&o).expect("valid");
+    let alone = VesselGeometry { branches: vec![capsule], fillet: 0.0 }.build(&o).expect("valid");
     let on_capsule = |s: &VesselScene| {
         let p = &s.particles;
         (0..p.len())

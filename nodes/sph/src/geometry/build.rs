@@ -179,6 +179,9 @@ pub struct VesselScene {
     /// The lumen's signed distance (reservoirs excluded) sampled at spacing dx/2 over the particles'
     /// bounding box + 2 dx.
     pub sdf: SdfGrid,
+    /// The signed distance of the lumen *and* the reservoirs on the same grid: the region the fluid
+    /// particles may occupy, for the solver's anti-penetration guard ([`VesselScene::guard_domain`]).
+    pub fluid_region: SdfGrid,
     /// The compiled geometry with the openings as used and the reservoirs, for exact queries.
     pub lumen: Lumen,
     /// Area of the lumen \[m²\] (reservoirs excluded), from the wall contour (fine-grid accuracy).
@@ -192,6 +195,12 @@ pub struct VesselScene {
 }
 
 impl VesselScene {
+    /// The fluid region (lumen and reservoirs) as a [`crate::walls::Domain`] for
+    /// [`crate::Solver::with_domain`].
+    pub fn guard_domain(&self) -> std::sync::Arc<dyn crate::walls::Domain> {
+        std::sync::Arc::new(self.fluid_region.clone())
+    }
+
     /// Number of particles of `kind`.
     pub fn count(&self, kind: ParticleKind) -> usize {
         self.particles.kind.iter().filter(|&&k| k == kind).count()
@@ -479,12 +488,15 @@ pub(super) fn build(geom: &VesselGeometry, opts: &BuildOptions) -> Result<Vessel
     let gnx = ((bh[0] - bl[0] + 4.0 * dx) / sp).ceil() as usize + 1;
     let gnz = ((bh[1] - bl[1] + 4.0 * dx) / sp).ceil() as usize + 1;
     let sdf = SdfGrid::sample(|x, z| lumen.signed_distance(x, z), g_origin, sp, gnx, gnz, opts.parallel);
+    let fluid_region =
+        SdfGrid::sample(|x, z| lumen.signed_distance_with_reservoirs(x, z), g_origin, sp, gnx, gnz, opts.parallel);
 
     Ok(VesselScene {
         particles,
         boundaries,
         openings,
         sdf,
+        fluid_region,
         lumen,
         lumen_area,
         dx,

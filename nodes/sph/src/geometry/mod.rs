@@ -97,6 +97,13 @@ pub use shape::{EndSide, Lumen, Opening, SdfGrid, SegmentHit};
 pub struct VesselGeometry {
     /// The branches (at least one), written in flow direction.
     pub branches: Vec<Branch>,
+    /// Blend length k of the union of branches \[m\] (≥ 0, default 0 = sharp): the branches'
+    /// signed distances d₁, d₂ are joined by the polynomial smooth minimum
+    /// min(d₁, d₂) − k/4 · max(0, 1 − |d₁ − d₂|/k)², which rounds the corners where branches meet —
+    /// the flow divider (carina) of a bifurcation becomes a rounded apex of radius ≈ k/2 instead of a
+    /// sharp wedge, which a particle wall cannot resolve.
+    #[serde(default)]
+    pub fillet: Real,
 }
 
 /// One branch: a centre-line with a diameter and two ends.
@@ -467,6 +474,9 @@ impl VesselGeometry {
     /// Checks the geometry; the error names the first bad field (see [`GeometryError`]). The
     /// resolution-dependent checks (diameter ≥ 4 dx, reservoir depth) are made by [`Self::build`].
     pub fn validate(&self) -> Result<(), GeometryError> {
+        if !(self.fillet.is_finite() && self.fillet >= 0.0) {
+            return Err(out_of_range("fillet", self.fillet, ">= 0 [m]"));
+        }
         if self.branches.is_empty() {
             return Err(GeometryError::Count {
                 field: "branches".into(),

@@ -11,6 +11,7 @@ pub fn straight_tube(length: Real, diameter: Real, centre: [Real; 2], angle: Rea
     let (c, s) = (angle.cos(), angle.sin());
     let half = 0.5 * length;
     VesselGeometry {
+        fillet: 0.0,
         branches: vec![Branch {
             name: "tube".into(),
             centreline: vec![
@@ -54,6 +55,7 @@ pub fn stenosis(
     };
     let p0 = [centre[0] - 0.5 * length * c, centre[1] - 0.5 * length * s];
     VesselGeometry {
+        fillet: 0.0,
         branches: vec![Branch {
             name: "stenosis".into(),
             centreline: arc.iter().map(|a| [p0[0] + a * c, p0[1] + a * s]).collect(),
@@ -104,6 +106,9 @@ fn blend(s: Real, a: Real, b: Real) -> Real {
     }
 }
 
+/// Blend length of the carotid preset's branch union \[m\] (see [`super::VesselGeometry::fillet`]).
+pub const CAROTID_FILLET: Real = 1.0e-3;
+
 /// The 2D carotid bifurcation of Shahriari & Garcia (2018, §2.2; diameters of Zhao et al. 2003):
 /// common carotid (CCA) 8 mm, internal (ICA) 5.55 mm with a carotid bulb, external (ECA) 4.65 mm,
 /// outlet split 54 % ICA / 46 % ECA. Flow from left to right; the probe is at z = 0 and images
@@ -132,7 +137,10 @@ fn blend(s: Real, a: Real, b: Real) -> Real {
 /// kernel sum of a fluid particle is 1.0–1.2 (a row at the worst offset, 1.5 dx, sees 0.835; see
 /// [`super::VesselGeometry::build`]). The carina is the sharp corner where the internal branch's
 /// lower wall meets the external branch's upper wall, past the CCA's cap; the wall between the
-/// daughters is 1 mm thick 1 mm past the apex, 2 mm at 2 mm, 7 mm at x = 10.
+/// daughters is 1 mm thick 1 mm past the apex, 2 mm at 2 mm, 7 mm at x = 10. The union is blended
+/// with [`CAROTID_FILLET`], which rounds that corner into an apex of ≈ 0.5 mm radius (a sharp wedge
+/// has too few wall particles at its tip to hold the fluid off it: particles pile up at the
+/// stagnation point).
 pub fn carotid_bifurcation() -> VesselGeometry {
     let mm = 1e-3;
     let deg = std::f64::consts::PI / 180.0;
@@ -165,6 +173,7 @@ pub fn carotid_bifurcation() -> VesselGeometry {
         })
         .collect();
     VesselGeometry {
+        fillet: CAROTID_FILLET,
         branches: vec![
             Branch {
                 name: "common".into(),

@@ -219,6 +219,18 @@ pub struct Lumen {
     shapes: Vec<Shape>,
     openings: Vec<Opening>,
     depth: Real,
+    fillet: Real,
+}
+
+/// Polynomial smooth minimum min(a, b) − k/4 · max(0, 1 − |a − b|/k)² (plain min for k = 0).
+#[inline]
+fn smooth_min(a: Real, b: Real, k: Real) -> Real {
+    let m = a.min(b);
+    if k <= 0.0 || !m.is_finite() {
+        return m;
+    }
+    let h = (1.0 - (a - b).abs() / k).max(0.0);
+    m - 0.25 * k * h * h
 }
 
 impl Lumen {
@@ -268,7 +280,7 @@ impl Lumen {
                 Shape { cones, cuts, bbox }
             })
             .collect();
-        Lumen { shapes, openings: openings.to_vec(), depth }
+        Lumen { shapes, openings: openings.to_vec(), depth, fillet: geom.fillet.max(0.0) }
     }
 
     /// The openings.
@@ -284,8 +296,9 @@ impl Lumen {
     #[inline]
     fn eval(&self, x: Real, z: Real, offset: Real) -> Real {
         let mut best = Real::INFINITY;
+        let k = self.fillet;
         for sh in &self.shapes {
-            if box_bound(&sh.bbox, x, z) >= best {
+            if box_bound(&sh.bbox, x, z) >= best + k {
                 continue;
             }
             let mut d = Real::INFINITY;
@@ -297,7 +310,7 @@ impl Lumen {
             for (o, n) in &sh.cuts {
                 d = d.max((x - o[0]) * n[0] + (z - o[1]) * n[1] - offset);
             }
-            best = best.min(d);
+            best = smooth_min(best, d, k);
         }
         best
     }
@@ -404,6 +417,12 @@ impl SdfGrid {
     /// True when (x, z) is inside (interpolated value < 0).
     pub fn is_inside(&self, x: Real, z: Real) -> bool {
         self.value(x, z) < 0.0
+    }
+}
+
+impl crate::walls::Domain for SdfGrid {
+    fn signed_distance(&self, x: Real, z: Real) -> Real {
+        self.value(x, z)
     }
 }
 
