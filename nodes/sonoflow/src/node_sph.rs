@@ -96,6 +96,10 @@ pub struct SphNodeParams {
     /// Reservoir depth \[m\] (default: support + 2 dx).
     #[serde(default)]
     pub reservoir_depth: Option<Real>,
+    /// Iterations of the geometric relaxation of the initial particles against the walls (evens
+    /// out the kernel sums next to curved walls; 0 = the lattice as is). Default 200.
+    #[serde(default = "default_relax")]
+    pub relax_iterations: usize,
     /// Acquisition schedule: particle snapshots at these times (seconds of simulated time).
     #[serde(default)]
     pub schedule: Schedule,
@@ -121,6 +125,10 @@ pub struct SphNodeParams {
     /// Simulated time between diagnostics messages outside the packets \[s\]. Default 0.01.
     #[serde(default = "default_stats_interval")]
     pub stats_interval: Real,
+}
+
+fn default_relax() -> usize {
+    200
 }
 
 fn default_initial() -> InitialVelocity {
@@ -165,6 +173,7 @@ pub fn prepare(v: &serde_json::Value) -> Result<Prepared, String> {
         initial_velocity: p.initial_velocity,
         wall_layers: p.wall_layers,
         reservoir_depth: p.reservoir_depth,
+        relax_iterations: p.relax_iterations,
         parallel: solver.parallel,
         ..BuildOptions::for_solver(&solver, p.dx)
     };

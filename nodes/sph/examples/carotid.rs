@@ -37,6 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         inflow,
         profile: ProfileKind::Womersley,
         initial_velocity: InitialVelocity::FullyDeveloped,
+        relax_iterations: 200,
         ..BuildOptions::for_solver(&params, dx)
     };
     let t0 = std::time::Instant::now();

@@ -23,8 +23,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("{}", toml::to_string(&geom)?);
     }
     let h = 1.2 * dx;
-    let opts =
-        BuildOptions { dx, support: 2.5 * h, initial_velocity: InitialVelocity::FullyDeveloped, ..Default::default() };
+    let opts = BuildOptions {
+        dx,
+        support: 2.5 * h,
+        initial_velocity: InitialVelocity::FullyDeveloped,
+        relax_iterations: std::env::var("RELAX").ok().and_then(|v| v.parse().ok()).unwrap_or(0),
+        ..Default::default()
+    };
     let t = Instant::now();
     let scene = geom.build(&opts)?;
     let took = t.elapsed().as_secs_f64();

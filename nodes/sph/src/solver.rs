@@ -753,7 +753,7 @@ impl Solver {
     }
 
     /// Particle shifting (see [`SphParams::shifting`]), with ∇C and ∇u of the half-step evaluation;
-    /// tangential next to walls, none within one kernel support of an opening.
+    /// parallel to the opening within one kernel support of an opening.
     fn shift(&mut self, dt: Real) {
         let a = self.params.shifting;
         if a <= 0.0 {
@@ -775,29 +775,19 @@ impl Solver {
             if !p.kind[i].is_fluid() {
                 continue;
             }
-            // no shifting within one support of an opening: the reservoir particles sit on lanes,
-            // and shifting across the opening would move fluid out faster than the flow does
-            // (measured: 0.7–2 % excess outflow in a pulsatile tube and the carotid)
-            let near_opening = self.boundaries.iter().any(|b| {
-                let (s, y) = b.spec.local(p.x[i], p.z[i]);
-                s > -support && y.abs() <= b.spec.half_width + support
-            });
-            if near_opening {
-                continue;
-            }
             let r = &self.ws.rates[i];
             let (mut sx, mut sz) = (-d * r.grad_c[0], -d * r.grad_c[1]);
-            // next to a wall only along it: the walls' particles are not a lattice continuation of
-            // the fluid (type I on the wall, the first fluid row 0.5–1.5 dx away), and shifting
-            // across the wall direction would sort fluid particles away from (or into) the walls —
-            // measured: a 0.7–2 % excess of outflow (particles gathered in the fast core)
-            let gw = r.grad_c_wall;
-            let gn = (gw[0] * gw[0] + gw[1] * gw[1]).sqrt();
-            if gn > 0.0 {
-                let (nx, nz) = (gw[0] / gn, gw[1] / gn);
-                let dn = sx * nx + sz * nz;
-                sx -= dn * nx;
-                sz -= dn * nz;
+            // within one support of an opening only parallel to it: the reservoir particles sit on
+            // lanes and move with the imposed profile, and shifting across the opening would move
+            // fluid out faster than the flow does (measured: −0.3 % of the particles in 0.1 s)
+            for b in &self.boundaries {
+                let (s, y) = b.spec.local(p.x[i], p.z[i]);
+                if s > -support && y.abs() <= b.spec.half_width + support {
+                    let n = b.spec.normal;
+                    let dn = sx * n[0] + sz * n[1];
+                    sx -= dn * n[0];
+                    sz -= dn * n[1];
+                }
             }
             let len = (sx * sx + sz * sz).sqrt();
             if len > cap {

@@ -41,9 +41,6 @@ pub struct Rate {
     pub grad_c: [Real; 2],
     /// Velocity gradient (∂u_x/∂x, ∂u_x/∂z, ∂u_z/∂x, ∂u_z/∂z) \[1/s\] (eq 6a; only with shifting).
     pub grad_u: [Real; 4],
-    /// The wall particles' part of `grad_c` \[1/m\]: points towards the wall; zero away from walls
-    /// (only with shifting; the shift is made tangential where it is non-zero).
-    pub grad_c_wall: [Real; 2],
 }
 
 /// Constant C of the mean-value viscous term (eq 12) for `kernel` (see [`ViscousConstant`]).
@@ -160,7 +157,6 @@ pub fn compute_rates(
         // W at the particle spacing Δp = √(m/ρ₀), for the anti-clumping term of the shifting gradient
         let w_dp = if shifting || tensile { kernel.w((m[a] / params.rho0).sqrt()) } else { 1.0 };
         let (mut gcx, mut gcz) = (0.0, 0.0);
-        let (mut gwx, mut gwz) = (0.0, 0.0);
         let mut gu = [0.0; 4];
         let (uax, uaz, ra) = (ux[a], uz[a], rho[a]);
         let pa_term = p[a] / (ra * ra);
@@ -192,10 +188,6 @@ pub fn compute_rates(
                 let corr = vb * (1.0 + 0.2 * q2 * q2);
                 gcx += corr * gx;
                 gcz += corr * gz;
-                if kind[b].is_wall() {
-                    gwx += corr * gx;
-                    gwz += corr * gz;
-                }
                 gu[0] -= vb * dux * gx;
                 gu[1] -= vb * dux * gz;
                 gu[2] -= vb * duz * gx;
@@ -229,13 +221,6 @@ pub fn compute_rates(
         } else {
             (mvx, mvz)
         };
-        Rate {
-            drho,
-            acc: [apx + avx + g[0], apz + avz + g[1]],
-            r2min,
-            grad_c: [gcx, gcz],
-            grad_u: gu,
-            grad_c_wall: [gwx, gwz],
-        }
+        Rate { drho, acc: [apx + avx + g[0], apz + avz + g[1]], r2min, grad_c: [gcx, gcz], grad_u: gu }
     });
 }

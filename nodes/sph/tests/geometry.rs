@@ -640,3 +640,33 @@ fn far_side_clipping_keeps_the_walls_of_other_branches() {
     assert!((0..p.len())
         .all(|i| !p.kind[i].is_wall() || p.x[i] > x_far + 1.5 * DX || (p.z[i] - zc).abs() >= 0.5 * D - 1e-3 * DX));
 }
+
+#[test]
+fn relaxation_evens_out_the_kernel_sums_along_curved_walls() {
+    // The lattice cut by curved walls leaves kernel sums from 0.84 to 1.26 next to the walls (and
+    // 0.82 at the carina at 0.15 mm); 200 iterations of the geometric relaxation bring every fluid
+    // particle to ≥ 0.95 (measured: min 0.986 at 0.3 mm, 0.967 at 0.15 mm), without crowding,
+    // with every particle still in the lumen, and deterministically (serial = parallel).
+    let o = BuildOptions { relax_iterations: 200, ..opts(0.3e-3) };
+    let scene = carotid_bifurcation().build(&o).expect("valid");
+    let cov = coverage(&scene);
+    let min = cov.iter().map(|c| c.3).fold(Real::INFINITY, Real::min);
+    let max = cov.iter().map(|c| c.3).fold(0.0, Real::max);
+    let dmin = min_pair_distance(&scene, |_| true);
+    println!("relaxed carotid 0.3 mm: kernel sums {min:.4} … {max:.4}, min pair distance {:.3} dx", dmin / scene.dx);
+    assert!(min >= 0.95, "{min}");
+    assert!(max <= 1.1, "{max}");
+    assert!(dmin >= 0.48 * scene.dx);
+    let p = &scene.particles;
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Fluid {
+            assert!(scene.lumen.signed_distance(p.x[i], p.z[i]) <= -0.25 * scene.dx * (1.0 - 1e-9));
+        }
+    }
+    let serial = carotid_bifurcation().build(&BuildOptions { parallel: false, ..o }).expect("valid");
+    assert_eq!(serial.particles, scene.particles);
+    // unrelaxed: the lattice as it is cut
+    let plain = carotid_bifurcation().build(&opts(0.3e-3)).expect("valid");
+    let pmin = coverage(&plain).iter().map(|c| c.3).fold(Real::INFINITY, Real::min);
+    assert!(pmin < 0.9, "{pmin}");
+}

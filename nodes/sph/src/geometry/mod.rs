@@ -85,6 +85,7 @@ use crate::Real;
 mod build;
 mod contour;
 mod presets;
+mod relax;
 mod shape;
 
 pub use build::{BuildOptions, InitialVelocity, VesselScene};
