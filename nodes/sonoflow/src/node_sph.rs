@@ -9,7 +9,8 @@ use serde::Deserialize;
 use sonoflow_analytic_flow::{GridSpec, Schedule};
 use sonoflow_messages::kinds::{FlowStats, ParticleSnapshot, VectorField};
 use sonoflow_messages::*;
-use sonoflow_node_kit::{thread_cpu_ns, Kit, Output};
+// The solver runs on rayon threads: its cost is the process CPU time (the node does nothing else).
+use sonoflow_node_kit::{process_cpu_ns as thread_cpu_ns, Kit, Output};
 use sonoflow_sph::geometry::{
     carotid_bifurcation, stenosis, straight_tube, BuildOptions, InitialVelocity, VesselGeometry, VesselScene,
 };
@@ -330,7 +331,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     }
     events.sort_by(|a, b| a.0.total_cmp(&b.0));
     let t_end = p.run_until.unwrap_or(p.schedule.end_time()).max(t_start);
-    let total_ms = (((t_end - t_start) * 1e3).ceil() as u64).max(1);
+    // progress in units of 0.1 ms of simulated time
+    let total_ms = (((t_end - t_start) * 1e4).ceil() as u64).max(1);
     let mut solver_cpu = 0u64;
     let mut last_t = t_start;
     let mut next_stats = t_start;
@@ -371,7 +373,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                     publish_stats(so, solver, 0, *solver_cpu)?;
                 }
                 *next_stats += p.stats_interval;
-                let done = (((solver.time() - t_start) * 1e3) as u64).min(total_ms);
+                let done = (((solver.time() - t_start) * 1e4) as u64).min(total_ms);
                 kit.progress(done, total_ms);
             }
             if kit.check_termination().is_err() {
@@ -441,6 +443,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 }
                 last_t = at.t;
                 frame_done += 1;
+                kit.progress((((solver.time() - t_start) * 1e4) as u64).min(total_ms), total_ms);
             }
             Event::Truth { packet, t, frame_id } => {
                 let (Some(g), Some(tout)) = (grid.as_ref(), truth_out.as_mut()) else { continue };
