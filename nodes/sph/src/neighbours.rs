@@ -57,6 +57,11 @@ impl Axis {
 
     #[inline]
     fn coord(&self, v: Real) -> usize {
+        // periodic: positions outside the interval (moving walls are not wrapped) fall in their image cell
+        let v = match self.periodic {
+            Some(p) => p.wrap(v),
+            None => v,
+        };
         (((v - self.origin) / self.cell).floor().max(0.0) as usize).min(self.n - 1)
     }
 
@@ -231,7 +236,10 @@ mod tests {
             (s >> 11) as Real / (1u64 << 53) as Real
         };
         let n = 500;
-        let x: Vec<Real> = (0..n).map(|_| rnd() * 1.0).collect();
+        // a few points outside the periodic interval (moving walls are not wrapped)
+        let x: Vec<Real> = (0..n)
+            .map(|i| rnd() * 1.0 + if i % 50 == 0 { 1.0 } else { 0.0 } - if i % 70 == 0 { 1.0 } else { 0.0 })
+            .collect();
         let z: Vec<Real> = (0..n).map(|_| rnd() * 0.7 - 0.2).collect();
         let px = Some(Period { min: 0.0, length: 1.0 });
         let pz = Some(Period { min: -0.2, length: 0.7 });
