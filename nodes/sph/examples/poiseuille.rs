@@ -2,6 +2,7 @@
 //! prints E∞ and E₂ (% of u_max) against the series solution.
 //!
 //! `cargo run --release -p sonoflow-sph --example poiseuille -- [t_end] [c] [n_across...]`
+//! (`CONTINUOUS=1`: eq 12's constant from the continuous second moment instead of the lattice one)
 
 use sonoflow_sph::analytic::poiseuille;
 use sonoflow_sph::setup::ChannelConfig;
@@ -29,6 +30,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             body_force: [f, 0.0],
             periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
             dt_max: 1.0,
+            viscous_constant: if std::env::var("CONTINUOUS").is_ok() {
+                sonoflow_sph::ViscousConstant::SecondMoment
+            } else {
+                sonoflow_sph::ViscousConstant::LatticeMoment
+            },
             ..Default::default()
         };
         let mut s = Solver::new(params, cfg.build(), 0.0)?;

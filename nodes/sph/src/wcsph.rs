@@ -44,11 +44,34 @@ pub struct Rate {
 }
 
 /// Constant C of the mean-value viscous term (eq 12) for `kernel` (see [`ViscousConstant`]).
-pub fn mean_value_constant(kernel: &Kernel, choice: ViscousConstant) -> Real {
+/// `spacing` is the particle spacing Δp \[m\] (used by [`ViscousConstant::LatticeMoment`] only).
+pub fn mean_value_constant(kernel: &Kernel, choice: ViscousConstant, spacing: Real) -> Real {
     match choice {
         ViscousConstant::SecondMoment => 4.0 / kernel.second_moment(),
         ViscousConstant::SupportRadius => 8.0 / (kernel.support_radius() * kernel.support_radius()),
+        ViscousConstant::LatticeMoment => {
+            let n = (kernel.support_radius() / spacing).ceil() as i64 + 1;
+            let (mut m2, mut m0) = (0.0, 0.0);
+            for i in -n..=n {
+                for j in -n..=n {
+                    let r = spacing * ((i * i + j * j) as Real).sqrt();
+                    let w = kernel.w(r);
+                    m2 += r * r * w;
+                    m0 += w;
+                }
+            }
+            if m2 > 0.0 {
+                4.0 * m0 / m2
+            } else {
+                4.0 / kernel.second_moment()
+            }
+        }
     }
+}
+
+/// Particle spacing Δp = √(m/ρ₀) of the first non-wall particle (`h` if there is none).
+pub fn particle_spacing(params: &SphParams, kernel: &Kernel, particles: &Particles) -> Real {
+    particles.kind.iter().position(|k| !k.is_wall()).map_or(kernel.h, |i| (particles.mass[i] / params.rho0).sqrt())
 }
 
 /// Equation of state (eq 8) with optional background pressure: p = c²(ρ − ρ₀) + p_b.
@@ -141,7 +164,7 @@ pub fn compute_rates(
 
     let (ux, uz, p, rho, m) = (&ws.ux[..], &ws.uz[..], &ws.p[..], &ws.rho[..], &particles.mass[..]);
     let mean_value = params.viscous_term == ViscousTerm::MeanValue;
-    let c_visc = mean_value_constant(kernel, params.viscous_constant);
+    let c_visc = mean_value_constant(kernel, params.viscous_constant, particle_spacing(params, kernel, particles));
     let mu = params.mu;
     let eta2 = 0.01 * kernel.h * kernel.h;
     let w0 = kernel.w(0.0);
