@@ -19,6 +19,7 @@
 
 pub mod analytic;
 pub mod boundary;
+pub mod fast;
 pub mod kernel;
 pub mod neighbours;
 pub mod params;

@@ -16,6 +16,7 @@
 use std::sync::Arc;
 
 use crate::boundary::{self, BoundaryFlux, BoundaryState, OpenBoundary};
+use crate::fast::{self, FastWorkspace};
 use crate::kernel::Kernel;
 use crate::neighbours::CellList;
 use crate::params::{ParamError, SphParams};
@@ -164,6 +165,7 @@ pub struct Solver {
     time: Real,
     cells: CellList,
     ws: Workspace,
+    fast: FastWorkspace,
     x0: Vec<Real>,
     z0: Vec<Real>,
     vx0: Vec<Real>,
@@ -224,6 +226,7 @@ impl Solver {
             time,
             cells: CellList::default(),
             ws: Workspace::default(),
+            fast: FastWorkspace::default(),
             x0: Vec::new(),
             z0: Vec::new(),
             vx0: Vec::new(),
@@ -467,9 +470,13 @@ impl Solver {
     }
 
     fn evaluate(&mut self, t: Real) {
+        let g = self.body_force_at(t);
+        if self.params.fast_rhs {
+            fast::compute_rates(&self.params, &self.kernel, &self.particles, g, &mut self.ws, &mut self.fast);
+            return;
+        }
         let r = self.kernel.support_radius();
         self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
-        let g = self.body_force_at(t);
         compute_rates(&self.params, &self.kernel, &self.particles, &self.cells, g, &mut self.ws);
     }
 

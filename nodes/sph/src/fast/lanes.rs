@@ -1,0 +1,253 @@
+//! Eight f32 lanes: a portable array type and an AVX2 + FMA register type with exactly the same IEEE
+//! operations (`+ − × ÷ √` correctly rounded, fused multiply-add with one rounding, `max`/`min` as
+//! `a > b ? a : b` / `a < b ? a : b`), so a kernel written once over [`Lanes`] gives the same bits
+//! with either type.
+
+/// Eight f32 lanes.
+///
+/// # Safety
+/// An implementation may assume the CPU features its operations need; a caller uses an
+/// implementation `L` only when `L::available()` is true.
+pub(super) unsafe trait Lanes: Copy {
+    /// The CPU can run this implementation.
+    fn available() -> bool;
+    /// All lanes `v`.
+    fn splat(v: f32) -> Self;
+    /// Loads 8 consecutive f32.
+    ///
+    /// # Safety
+    /// `p` points to 8 readable f32.
+    unsafe fn load(p: *const f32) -> Self;
+    /// `self + o`.
+    fn add(self, o: Self) -> Self;
+    /// `self − o`.
+    fn sub(self, o: Self) -> Self;
+    /// `self × o`.
+    fn mul(self, o: Self) -> Self;
+    /// `self ÷ o`.
+    fn div(self, o: Self) -> Self;
+    /// `self × b + c` with one rounding.
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    /// `self > o ? self : o`.
+    fn max(self, o: Self) -> Self;
+    /// `self < o ? self : o`.
+    fn min(self, o: Self) -> Self;
+    /// √self.
+    fn sqrt(self) -> Self;
+    /// The lanes in order.
+    fn to_array(self) -> [f32; 8];
+}
+
+/// Sum of the lanes in f64, in lane order (the same for every implementation).
+#[inline(always)]
+pub(super) fn sum_f64<L: Lanes>(v: L) -> f64 {
+    v.to_array().iter().fold(0.0, |s, &x| s + x as f64)
+}
+
+/// Smallest lane.
+#[inline(always)]
+pub(super) fn min_lane<L: Lanes>(v: L) -> f32 {
+    v.to_array().iter().fold(f32::INFINITY, |s, &x| if x < s { x } else { s })
+}
+
+/// Portable twin: an array of 8 f32, lane by lane.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Portable([f32; 8]);
+
+#[inline(always)]
+fn zip(a: [f32; 8], b: [f32; 8], f: impl Fn(f32, f32) -> f32) -> [f32; 8] {
+    std::array::from_fn(|i| f(a[i], b[i]))
+}
+
+// SAFETY: plain scalar code, runs on every CPU.
+unsafe impl Lanes for Portable {
+    #[inline(always)]
+    fn available() -> bool {
+        true
+    }
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        Portable([v; 8])
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees 8 readable f32 at p.
+        Portable(unsafe { std::ptr::read_unaligned(p.cast::<[f32; 8]>()) })
+    }
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| a + b))
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| a - b))
+    }
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| a * b))
+    }
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| a / b))
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        Portable(std::array::from_fn(|i| self.0[i].mul_add(b.0[i], c.0[i])))
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| if a > b { a } else { b }))
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| if a < b { a } else { b }))
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        Portable(self.0.map(f32::sqrt))
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; 8] {
+        self.0
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(super) use avx::Avx;
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use std::arch::x86_64::*;
+
+    use super::Lanes;
+
+    /// One AVX register of 8 f32 (`vaddps`, `vfmadd…ps`, `vmaxps`, `vsqrtps`, …).
+    #[derive(Clone, Copy, Debug)]
+    pub(in crate::fast) struct Avx(__m256);
+
+    // SAFETY: every method needs AVX2 and FMA, which `available` checks; the trait's contract makes
+    // callers use this type only when it returned true (the kernels run it inside
+    // `#[target_feature(enable = "avx2,fma")]` functions, where these methods are inlined).
+    unsafe impl Lanes for Avx {
+        #[inline(always)]
+        fn available() -> bool {
+            std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        }
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_set1_ps(v) })
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f32) -> Self {
+            // SAFETY: 8 readable f32 at p (caller); AVX (impl contract).
+            Avx(unsafe { _mm256_loadu_ps(p) })
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_add_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_sub_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_mul_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_div_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            // vmaxps returns the second operand unless the first is greater (NaN and ±0 included).
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_min_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            // SAFETY: a holds 8 writable f32; AVX (impl contract).
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every operation of the AVX type gives the bits of the portable one, NaN, ±0, ±∞ and
+    /// subnormals included.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx_operations_match_the_portable_twin_bit_for_bit() {
+        if !Avx::available() {
+            eprintln!("no AVX2+FMA: nothing to compare");
+            return;
+        }
+        let special = [0.0f32, -0.0, 1.0, -1.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 1e-40, -3e-39, 2.5];
+        let mut s = 0x1234_5678_9ABC_DEF0u64;
+        let mut vals: Vec<f32> = special.to_vec();
+        for _ in 0..4000 {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            vals.push(f32::from_bits((s >> 32) as u32));
+            vals.push(((s >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 8.0);
+        }
+        let get = |k: usize| -> [f32; 8] { std::array::from_fn(|i| vals[(k * 8 + i * 7) % vals.len()]) };
+        for k in 0..vals.len() {
+            let (a, b, c) = (get(k), get(k + 1), get(k + 3));
+            // SAFETY: AVX2+FMA checked above; the arrays hold 8 f32.
+            let (pa, pb, pc, va, vb, vc) = unsafe {
+                (
+                    Portable::load(a.as_ptr()),
+                    Portable::load(b.as_ptr()),
+                    Portable::load(c.as_ptr()),
+                    Avx::load(a.as_ptr()),
+                    Avx::load(b.as_ptr()),
+                    Avx::load(c.as_ptr()),
+                )
+            };
+            let bits = |v: [f32; 8]| v.map(f32::to_bits);
+            let pairs = [
+                (pa.add(pb).to_array(), va.add(vb).to_array()),
+                (pa.sub(pb).to_array(), va.sub(vb).to_array()),
+                (pa.mul(pb).to_array(), va.mul(vb).to_array()),
+                (pa.div(pb).to_array(), va.div(vb).to_array()),
+                (pa.mul_add(pb, pc).to_array(), va.mul_add(vb, vc).to_array()),
+                (pa.max(pb).to_array(), va.max(vb).to_array()),
+                (pa.min(pb).to_array(), va.min(vb).to_array()),
+                (pa.sqrt().to_array(), va.sqrt().to_array()),
+                (Portable::splat(a[0]).to_array(), Avx::splat(a[0]).to_array()),
+            ];
+            for (op, (p, v)) in pairs.iter().enumerate() {
+                // NaN payloads may differ; NaN-ness may not.
+                let canon = |x: [f32; 8]| x.map(|y| if y.is_nan() { u32::MAX } else { y.to_bits() });
+                assert_eq!(canon(*p), canon(*v), "op {op} on {a:?} {b:?} {c:?}: {:?} vs {:?}", bits(*p), bits(*v));
+            }
+            assert_eq!(sum_f64(pa).to_bits(), sum_f64(va).to_bits());
+            assert_eq!(min_lane(pa).to_bits(), min_lane(va).to_bits());
+        }
+    }
+}
