@@ -8,7 +8,9 @@
 //! with a a fluid particle (the rate loop), plus those with a a wall particle and b not (the wall
 //! interpolation). Pairs/s/core = that count / time per evaluation / threads.
 //!
-//! `cargo run --release -p sonoflow-sph --example rhs_bench -- [n_fluid...]` (default 26000)
+//! `cargo run --release -p sonoflow-sph --example rhs_bench -- [--fast-only] [--reach=K] [n_fluid...]`
+//! (default 26000 fluid particles; `--fast-only` skips timing the reference, e.g. under a profiler;
+//! `--reach=K`: fast grid cells per support radius, default 2).
 
 use std::time::Instant;
 
@@ -106,30 +108,55 @@ fn count_pairs(p: &Particles, params: &SphParams, k: &Kernel) -> (usize, usize) 
     (rate, wall)
 }
 
-/// Seconds per call of `f`: (min, median) over batches of at least 0.15 s, ~1.5 s in all.
-fn time(mut f: impl FnMut()) -> (Real, Real) {
+/// CPU time of all threads of this process \[s\] (Linux: sum of /proc/self/task/*/schedstat), if
+/// available.
+fn cpu_seconds() -> Option<Real> {
+    let mut ns = 0u64;
+    for t in std::fs::read_dir("/proc/self/task").ok()? {
+        let s = std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok()?;
+        ns += s.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(ns as Real * 1e-9)
+}
+
+/// Per call of `f`: (min, median) wall seconds and min CPU seconds (all threads) over 9 batches of
+/// at least 0.15 s.
+fn time(mut f: impl FnMut()) -> (Real, Real, Real) {
     f();
     let t = Instant::now();
     f();
     let once = t.elapsed().as_secs_f64().max(1e-6);
     let reps = ((0.15 / once).ceil() as usize).max(1);
+    let mut cpu = Real::INFINITY;
     let mut v: Vec<Real> = (0..9)
         .map(|_| {
+            let c0 = cpu_seconds();
             let t = Instant::now();
             for _ in 0..reps {
                 f();
             }
-            t.elapsed().as_secs_f64() / reps as Real
+            let wall = t.elapsed().as_secs_f64() / reps as Real;
+            if let (Some(a), Some(b)) = (c0, cpu_seconds()) {
+                cpu = cpu.min((b - a) / reps as Real);
+            }
+            wall
         })
         .collect();
     v.sort_by(Real::total_cmp);
-    (v[0], v[v.len() / 2])
+    (v[0], v[v.len() / 2], cpu)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let sizes: Vec<usize> = std::env::args().skip(1).map(|s| s.parse()).collect::<Result<_, _>>()?;
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let fast_only = args.iter().any(|a| a == "--fast-only");
+    let reach: Option<usize> = args.iter().find_map(|a| a.strip_prefix("--reach=")).map(str::parse).transpose()?;
+    let sizes: Vec<usize> =
+        args.iter().filter(|a| !a.starts_with("--")).map(|s| s.parse()).collect::<Result<_, _>>()?;
     let sizes = if sizes.is_empty() { vec![26_000] } else { sizes };
-    println!("scene    n_fluid n_wall  pairs/eval  path       thr  ms/eval (min/med)  pairs/s/core (best)  steps/s  speed-up");
+    println!("wall: best and median of 9 batches; cpu: CPU time of all threads (robust to other load)");
+    println!(
+        "scene    n_fluid n_wall  pairs/eval  path       thr  wall ms/eval (min/med)  cpu ms  pairs/s/core wall   cpu     steps/s  speed-up"
+    );
     for &n in &sizes {
         for (name, (p, params)) in [("box", scene_box(n)), ("channel", scene_channel(n))] {
             params.validate()?;
@@ -143,14 +170,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let prm = SphParams { parallel: threads > 1, ..params.clone() };
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
                 let (mut ws, mut cells) = (Workspace::default(), CellList::default());
-                let (rmin, rmed) = pool.install(|| {
-                    time(|| {
-                        cells.build(&p.x, &p.z, k.support_radius(), prm.periodic_x, prm.periodic_z);
-                        compute_rates(&prm, &k, &p, &cells, g, &mut ws);
-                    })
-                });
-                let (mut fws_ws, mut fws) = (Workspace::default(), FastWorkspace::default());
-                let (fmin, fmed) =
+                let mut reference = || {
+                    cells.build(&p.x, &p.z, k.support_radius(), prm.periodic_x, prm.periodic_z);
+                    compute_rates(&prm, &k, &p, &cells, g, &mut ws);
+                };
+                let (rmin, rmed, rcpu) = if fast_only {
+                    reference();
+                    (Real::NAN, Real::NAN, Real::NAN)
+                } else {
+                    pool.install(|| time(reference))
+                };
+                let mut fws = reach.map_or_else(FastWorkspace::default, FastWorkspace::with_reach);
+                let mut fws_ws = Workspace::default();
+                let (fmin, fmed, fcpu) =
                     pool.install(|| time(|| fast::compute_rates(&prm, &k, &p, g, &mut fws_ws, &mut fws)));
                 ref_ms[ti] = rmin;
                 let mut err: Real = 0.0;
@@ -161,14 +193,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         scale = scale.max(x.abs());
                     }
                 }
-                for (path, tmin, tmed) in [("reference", rmin, rmed), ("fast", fmin, fmed)] {
+                for (path, tmin, tmed, tcpu) in [("reference", rmin, rmed, rcpu), ("fast", fmin, fmed, fcpu)] {
                     println!(
-                        "{name:8} {:7} {n_wall:6} {:11.0}  {path:10} {threads:3}  {:7.2} / {:7.2}   {:12.3e}        {:7.1}  {:5.2}",
+                        "{name:8} {:7} {n_wall:6} {:11.0}  {path:10} {threads:3}  {:8.2} / {:8.2}      {:7.2}  {:10.3e} {:10.3e}  {:7.1}  {:5.2}",
                         p.len() - n_wall,
                         pairs,
                         1e3 * tmin,
                         1e3 * tmed,
+                        1e3 * tcpu,
                         pairs / tmin / threads as Real,
+                        pairs / tcpu,
                         1.0 / (2.0 * tmin),
                         ref_ms[0] / tmin,
                     );

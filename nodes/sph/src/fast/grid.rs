@@ -1,7 +1,7 @@
 //! Cell grid of the fast evaluator: cells of side ≥ support / `reach`, particles sorted by cell
-//! (row-major, stable counting sort: deterministic), and for each cell the runs of the sorted order
-//! that hold its neighbour cells (`reach` cells on each side), with the periodic shift of each run.
-//! Three (or five) cells next to each other in a row are one contiguous run.
+//! (row-major, stable counting sort: deterministic). The neighbour cells of a cell (`reach` cells
+//! on each side) are, row by row, ≤ 2 segments of consecutive cells ([`Axis::segments`]: 2 where a
+//! periodic axis wraps), each a contiguous run of the sorted order.
 
 use crate::neighbours::Period;
 use crate::Real;
@@ -10,7 +10,7 @@ use crate::Real;
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Axis {
     origin: Real,
-    cell: Real,
+    pub(super) cell: Real,
     pub(super) n: usize,
     /// Period length when periodic.
     period: Option<Real>,
@@ -31,29 +31,26 @@ impl Axis {
         }
     }
 
+    /// Cell of coordinate v, clamped to the grid (as `CellList`; `y.max(0) as usize` is
+    /// `floor(y).max(0) as usize` for every y, NaN included, without a libm call).
     #[inline]
     fn coord(&self, v: Real) -> usize {
-        (((v - self.origin) / self.cell).floor().max(0.0) as usize).min(self.n - 1)
+        (((v - self.origin) / self.cell).max(0.0) as usize).min(self.n - 1)
     }
 
-    /// Centre of cell `i`.
-    fn centre(&self, i: usize) -> Real {
-        self.origin + (i as Real + 0.5) * self.cell
-    }
-
-    /// Calls `f(j, shift)` for the cells j within `reach` of cell `i`, in increasing offset; `shift` is
-    /// added to the positions of cell j's particles to give their image next to cell i.
+    /// The cells within `reach` of cell `i` as ≤ 2 segments (first, last, shift) of consecutive
+    /// cells, in increasing offset; `shift` is added to the positions of the segment's particles to
+    /// give their image next to cell i. Returns the segments and their count.
     #[inline]
-    fn around(&self, i: usize, reach: usize, mut f: impl FnMut(usize, Real)) {
-        let (n, r) = (self.n as isize, reach as isize);
-        for d in -r..=r {
-            let j = i as isize + d;
-            match self.period {
-                Some(l) if j < 0 => f((j + n) as usize, -l),
-                Some(l) if j >= n => f((j - n) as usize, l),
-                _ if j < 0 || j >= n => {}
-                _ => f(j as usize, 0.0),
-            }
+    pub(super) fn segments(&self, i: usize, reach: usize) -> ([(usize, usize, Real); 2], usize) {
+        let n = self.n;
+        let none = (0, 0, 0.0);
+        match self.period {
+            // n > 2 reach: at most one side wraps
+            Some(l) if i < reach => ([(i + n - reach, n - 1, -l), (0, i + reach, 0.0)], 2),
+            Some(l) if i + reach >= n => ([(i - reach, n - 1, 0.0), (0, i + reach - n, l)], 2),
+            Some(_) => ([(i - reach, i + reach, 0.0), none], 1),
+            None => ([(i.saturating_sub(reach), (i + reach).min(n - 1), 0.0), none], 1),
         }
     }
 
@@ -61,15 +58,6 @@ impl Axis {
     fn supported(&self, reach: usize) -> bool {
         self.period.is_none() || self.n > 2 * reach
     }
-}
-
-/// A contiguous range of the sorted order and the shift of its positions.
-#[derive(Clone, Copy, Debug, Default)]
-pub(super) struct Run {
-    pub(super) start: usize,
-    pub(super) end: usize,
-    pub(super) sx: Real,
-    pub(super) sz: Real,
 }
 
 /// Uniform grid with particles sorted by cell.
@@ -149,46 +137,24 @@ impl Grid {
         (self.cell_start[c] as usize, self.cell_start[c + 1] as usize)
     }
 
-    /// Centre of cell `c` \[m\].
-    pub(super) fn centre(&self, c: usize) -> (Real, Real) {
-        (self.ax.centre(c % self.ax.n), self.az.centre(c / self.ax.n))
+    /// Centre of cell row `jz` \[m\].
+    pub(super) fn az_centre(&self, jz: usize) -> Real {
+        self.az.origin + (jz as Real + 0.5) * self.az.cell
     }
 
-    /// Fills `out` with the non-empty runs holding the neighbour cells of cell `c` (rows bottom to top,
-    /// each row left to right). Returns the offset of cell c's own particles in the concatenation
-    /// of the runs.
-    pub(super) fn runs(&self, c: usize, out: &mut Vec<Run>) -> usize {
-        out.clear();
-        let nx = self.ax.n;
-        let (cx, cz) = (c % nx, c / nx);
-        let mut offset = 0;
-        let mut own = 0;
-        self.az.around(cz, self.reach, |jz, sz| {
-            // consecutive columns with the same shift are one contiguous run
-            let mut cur: Option<(usize, usize, Real)> = None; // (first col, last col, shift)
-            let flush = |r: (usize, usize, Real), out: &mut Vec<Run>, offset: &mut usize, own: &mut usize| {
-                let (s, e) = (self.cell_start[jz * nx + r.0] as usize, self.cell_start[jz * nx + r.1 + 1] as usize);
-                if jz == cz && sz == 0.0 && r.2 == 0.0 && (r.0..=r.1).contains(&cx) {
-                    *own = *offset + self.cell_start[c] as usize - s;
-                }
-                if e > s {
-                    out.push(Run { start: s, end: e, sx: r.2, sz });
-                    *offset += e - s;
-                }
-            };
-            self.ax.around(cx, self.reach, |jx, sx| match cur {
-                Some((a, b, s)) if jx == b + 1 && s == sx => cur = Some((a, jx, s)),
-                Some(r) => {
-                    flush(r, out, &mut offset, &mut own);
-                    cur = Some((jx, jx, sx));
-                }
-                None => cur = Some((jx, jx, sx)),
-            });
-            if let Some(r) = cur {
-                flush(r, out, &mut offset, &mut own);
-            }
-        });
-        own
+    /// Cells per support radius.
+    pub(super) fn reach(&self) -> usize {
+        self.reach
+    }
+
+    /// Cell side along z \[m\].
+    pub(super) fn cell_z(&self) -> Real {
+        self.az.cell
+    }
+
+    /// Period along x \[m\], if periodic.
+    pub(super) fn period_x(&self) -> Option<Real> {
+        self.ax.period
     }
 }
 
@@ -198,64 +164,5 @@ fn min_max(v: &[Real]) -> (Real, Real) {
         (lo, hi)
     } else {
         (0.0, 0.0)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The runs of every cell cover exactly the particles within the support (minimum image), each
-    /// once, for reach 1 and 2 and every periodic combination.
-    #[test]
-    fn runs_cover_every_neighbour_once() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as Real / (1u64 << 53) as Real
-        };
-        let n = 600;
-        let x: Vec<Real> = (0..n).map(|_| rnd()).collect();
-        let z: Vec<Real> = (0..n).map(|_| rnd() * 0.7 - 0.2).collect();
-        let px = Some(Period { min: 0.0, length: 1.0 });
-        let pz = Some(Period { min: -0.2, length: 0.7 });
-        let r = 0.13;
-        for reach in [1, 2] {
-            for (p, q) in [(None, None), (px, None), (None, pz), (px, pz)] {
-                let mut g = Grid::default();
-                assert!(g.build(&x, &z, r, reach, p, q));
-                let mut runs = Vec::new();
-                for a in 0..n {
-                    let k = g.rank[a] as usize;
-                    let c = (0..g.cells()).find(|&c| (g.range(c).0..g.range(c).1).contains(&k)).expect("cell");
-                    let own = g.runs(c, &mut runs);
-                    let mut seen = Vec::new();
-                    let mut off = 0;
-                    for run in &runs {
-                        for kb in run.start..run.end {
-                            if off + kb - run.start == own + k - g.range(c).0 {
-                                assert_eq!(kb, k, "own offset");
-                            }
-                            let b = g.order[kb] as usize;
-                            let (dx, dz) = (x[a] - (x[b] + run.sx), z[a] - (z[b] + run.sz));
-                            if dx * dx + dz * dz < r * r {
-                                seen.push(b);
-                            }
-                        }
-                        off += run.end - run.start;
-                    }
-                    seen.sort_unstable();
-                    let mut want: Vec<usize> = (0..n)
-                        .filter(|&b| {
-                            let dx = p.map_or(x[a] - x[b], |p| p.image(x[a] - x[b]));
-                            let dz = q.map_or(z[a] - z[b], |q| q.image(z[a] - z[b]));
-                            dx * dx + dz * dz < r * r
-                        })
-                        .collect();
-                    want.sort_unstable();
-                    assert_eq!(seen, want, "particle {a} reach {reach} periodic {p:?} {q:?}");
-                }
-            }
-        }
     }
 }

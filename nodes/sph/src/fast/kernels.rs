@@ -1,23 +1,42 @@
 //! Pair kernels of the fast evaluator, written once over [`Lanes`] and instantiated for the portable
 //! lanes and (x86-64) the AVX2 + FMA lanes.
 //!
-//! Per cell, the particles of the neighbour cells are copied into one contiguous scratch buffer
-//! ([`Buf`]) with positions in units of h relative to the cell centre (f32), then every particle of
-//! the cell runs over the whole buffer 8 candidates at a time, without branches: the kernels are
-//! written with `max(0, ·)` so candidates outside the support contribute exact zeros, the buffer is
-//! padded to a multiple of 8 with far-away dummies of zero mass, and the particle's own entry is
-//! moved far away while it runs (its self term, in the Shepard denominator of eq 12 only, is added
-//! in f64 as in [`crate::wcsph::compute_rates`]).
+//! Every particle runs over the runs of the cell-sorted arrays that hold its neighbour cells
+//! ([`Grid::runs`]), 8 candidates at a time and without branches:
+//! * positions: x/h is stored as an f32 pair hi + lo (exact to ~1e-14 h at any domain size) and the
+//!   pair difference taken as (hi_a − hi_b) + (lo_a − lo_b), so dx is correct to one rounding of
+//!   itself; z is stored relative to the centre of the particle's cell row (|z̃| ≤ cell/2h), a run
+//!   being one row; the periodic shift of a run is applied to the running particle, in f64;
+//! * the kernels are written with `max(0, ·)`, so candidates outside the support give exact zeros;
+//! * the lanes past a run's end are masked (their f, f' and r² zeroed);
+//! * r² carries a tiny offset (1e-30 h²): the particle's own lane has r = 1e-15 h, f' = 0, hence
+//!   zero gradient terms, and W(0) in the Shepard denominator of eq 12 — the self term of
+//!   [`crate::wcsph::compute_rates`]; r² ≤ the offset is left out of the nearest distance.
 
-use super::grid::{Grid, Run};
-use super::lanes::{min_lane, sum_f64, Lanes};
+use super::grid::Grid;
+use super::lanes::{sum_f64, Lanes};
 use crate::particles::ParticleKind;
 use crate::wcsph::Rate;
 use crate::Real;
 
-/// Position of padding entries and of the running particle's own entry \[h\]: its kernel terms are
-/// exact zeros (q ≫ support) and every product stays finite in f32.
-const FAR: f32 = 1.0e6;
+/// Offset added to r² \[h²\] (see the module doc).
+const TINY2: f32 = 1.0e-30;
+/// `bits(r²) − R2_BIAS` maps r² ≤ TINY2 (own lane, masked lanes) above every other r² as u32.
+const R2_BIAS: u32 = TINY2.to_bits() + 1;
+/// Lane masks: 8 loads from `MASK[8 − k..]` give k ones then zeros.
+static MASK: [u32; 16] = [!0, !0, !0, !0, !0, !0, !0, !0, 0, 0, 0, 0, 0, 0, 0, 0];
+/// Zero entries after the sorted arrays (a masked tail may read up to 7 past the end).
+pub(super) const PAD: usize = 8;
+
+/// Mask of the first `k` (≤ 8) lanes.
+///
+/// # Safety
+/// `L::available()`.
+#[inline(always)]
+unsafe fn mask<L: Lanes>(k: usize) -> L {
+    // SAFETY: 8 − k ≥ 0 and 16 − (8 − k) ≥ 8 entries follow; u32 and f32 have one layout.
+    unsafe { L::load(MASK.as_ptr().add(8 - k).cast::<f32>()) }
+}
 
 /// A kernel shape in the lane form: f(q) = `FS` · f_s(q), f'(q) = `DS` · d_s(q), q = r/h.
 pub(super) trait Shape {
@@ -109,72 +128,129 @@ impl Shape for Cubic {
     }
 }
 
-/// Channels of the candidate buffer.
-pub(super) const NCH: usize = 7;
-
-/// Candidate buffer of one cell: positions relative to the cell centre in units of h, and up to
-/// [`NCH`] per-particle channels, padded to a multiple of 8.
-#[derive(Clone, Debug, Default)]
-pub(super) struct Buf {
-    x: Vec<f32>,
-    z: Vec<f32>,
-    ch: [Vec<f32>; NCH],
-    runs: Vec<Run>,
+/// One chunk of ≤ 8 consecutive candidates of one run: first sorted index, lane count, x frame of
+/// the running particle (0: no shift, else a periodic image), z offset / h of the running particle
+/// into the run's row frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Chunk {
+    i: u32,
+    k: u8,
+    frame: u8,
+    dz: f32,
 }
 
-impl Buf {
-    /// Copies the neighbour runs of cell `c` with the first `src.len()` channels; returns
-    /// (padded length, offset of cell c's own particles).
-    fn gather(
-        &mut self,
-        grid: &Grid,
-        c: usize,
-        xs: &[Real],
-        zs: &[Real],
-        src: &[&[f32]],
-        inv_h: Real,
-    ) -> (usize, usize) {
-        let own = grid.runs(c, &mut self.runs);
-        let (cx, cz) = grid.centre(c);
-        let total: usize = self.runs.iter().map(|r| r.end - r.start).sum();
-        let n8 = total.div_ceil(8) * 8;
-        self.x.resize(n8, FAR);
-        self.z.resize(n8, FAR);
-        for ch in &mut self.ch[..src.len()] {
-            ch.resize(n8, 0.0);
-        }
-        let mut o = 0;
-        for r in &self.runs {
-            let (s, e) = (r.start, r.end);
-            let (ox, oz) = (r.sx - cx, r.sz - cz);
-            for (d, &v) in self.x[o..o + e - s].iter_mut().zip(&xs[s..e]) {
-                *d = ((v + ox) * inv_h) as f32;
-            }
-            for (d, &v) in self.z[o..o + e - s].iter_mut().zip(&zs[s..e]) {
-                *d = ((v + oz) * inv_h) as f32;
-            }
-            for (ch, sc) in self.ch.iter_mut().zip(src) {
-                ch[o..o + e - s].copy_from_slice(&sc[s..e]);
-            }
-            o += e - s;
-        }
-        self.x[total..].fill(FAR);
-        self.z[total..].fill(FAR);
-        for ch in &mut self.ch[..src.len()] {
-            ch[total..].fill(0.0);
-        }
-        (n8, own)
+/// Chunks of the neighbour runs of one cell, and per-lane pair values of one particle (pass 1 of
+/// [`pair_sums`]).
+#[derive(Clone, Debug, Default)]
+pub(super) struct Scratch {
+    chunks: Vec<Chunk>,
+    /// dx, dz, f_s, d_s/r, d_s r/(r² + 0.01) per lane.
+    lane: [Vec<f32>; 5],
+}
+
+/// Per-evaluation constants of the chunk lists.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Frames {
+    /// x shift / h of frames 0 (none), 1 (−period), 2 (+period).
+    pub(super) shifts: [Real; 3],
+    /// z offset / h of the running particle into the frame of the row `d` cells away, at index
+    /// d + reach: −d · cell / h (a periodic image row is d cells away as well).
+    pub(super) dz: Vec<f32>,
+}
+
+impl Frames {
+    pub(super) fn new(grid: &Grid, inv_h: Real) -> Self {
+        let l = grid.period_x().unwrap_or(0.0) * inv_h;
+        let r = grid.reach() as isize;
+        let dz = (-r..=r).map(|d| (-(d as Real) * grid.cell_z() * inv_h) as f32).collect();
+        Frames { shifts: [0.0, -l, l], dz }
     }
+}
+
+impl Scratch {
+    /// Chunks of cell `c`; returns true when some use a shifted x frame.
+    #[inline]
+    fn cell(&mut self, grid: &Grid, fr: &Frames, c: usize) -> bool {
+        let nx = grid.ax.n;
+        let reach = grid.reach();
+        let (cx, cz) = (c % nx, c / nx);
+        let (cols, nc) = grid.ax.segments(cx, reach);
+        let (rows, nr) = grid.az.segments(cz, reach);
+        self.chunks.clear();
+        let starts = &grid.cell_start;
+        let nz = grid.az.n as isize;
+        for &(z0, z1, sz) in &rows[..nr] {
+            // row offset of the image of row jz: jz − cz (± nz for a periodic image)
+            let wrap = if sz < 0.0 {
+                -nz
+            } else if sz > 0.0 {
+                nz
+            } else {
+                0
+            };
+            for jz in z0..=z1 {
+                let d = jz as isize + wrap - cz as isize + reach as isize;
+                let dz = fr.dz[d as usize];
+                let base = jz * nx;
+                for &(x0, x1, sx) in &cols[..nc] {
+                    let frame = if sx == 0.0 {
+                        0
+                    } else if sx < 0.0 {
+                        1
+                    } else {
+                        2
+                    };
+                    let (mut i, e) = (starts[base + x0] as usize, starts[base + x1 + 1] as usize);
+                    while i < e {
+                        let k = (e - i).min(8);
+                        self.chunks.push(Chunk { i: i as u32, k: k as u8, frame, dz });
+                        i += k;
+                    }
+                }
+            }
+        }
+        let n8 = 8 * self.chunks.len();
+        for l in &mut self.lane {
+            if l.len() < n8 {
+                l.resize(n8, 0.0);
+            }
+        }
+        nc > 1
+    }
+}
+
+/// x/h of particle a in frame 0, or in the three frames, as f32 (hi, lo) pairs.
+#[inline(always)]
+fn frames(xoh: Real, shifts: &[Real; 3], all: bool) -> [f32; 6] {
+    let mut f = [0.0f32; 6];
+    for (j, &s) in shifts.iter().enumerate().take(if all { 3 } else { 1 }) {
+        let x = xoh - s;
+        let hi = x as f32;
+        f[2 * j] = hi;
+        f[2 * j + 1] = (x - hi as Real) as f32;
+    }
+    f
+}
+
+/// Positions of the sorted particles (each slice padded with [`PAD`] zeros).
+#[derive(Clone, Copy)]
+pub(super) struct Pos<'a> {
+    pub(super) grid: &'a Grid,
+    /// x/h (f64), hi and lo f32 parts.
+    pub(super) xoh: &'a [Real],
+    pub(super) xh: &'a [f32],
+    pub(super) xl: &'a [f32],
+    /// (z − row centre)/h.
+    pub(super) zr: &'a [f32],
 }
 
 /// Sorted particle data and constants of the rate pass.
 pub(super) struct RatesIn<'a> {
-    pub(super) grid: &'a Grid,
-    pub(super) xs: &'a [Real],
-    pub(super) zs: &'a [Real],
+    pub(super) pos: Pos<'a>,
+    pub(super) frames: &'a Frames,
     pub(super) wall: &'a [bool],
-    /// ux, uz, m p/ρ², m, m/ρ, ρ − ρ₀, (m/ρ for non-walls, 0 for walls) — f32.
-    pub(super) ch: [&'a [f32]; NCH],
+    /// ux, uz, m p/ρ², m, m/ρ, ρ − ρ₀, (m/ρ for non-walls, 0 for walls) — f32, padded.
+    pub(super) ch: [&'a [f32]; 7],
     /// p/ρ² (f32) of every particle.
     pub(super) pr: &'a [f32],
     pub(super) rho: &'a [Real],
@@ -189,8 +265,6 @@ pub(super) struct RateConsts {
     pub(super) inv_h: Real,
     /// σ/h³ · DS: ∇_a W = G (dx̃, dz̃) d_s/r̃ with positions in units of h.
     pub(super) grad: Real,
-    /// f_s(0) (self term of the Shepard denominator).
-    pub(super) f0: Real,
     /// C μ of eq 12.
     pub(super) c_mu: Real,
     /// μ.
@@ -214,49 +288,92 @@ struct Sums {
     s1: Real,
     s2: Real,
     s3: Real,
-    r2min: f32,
+    r2min: Real,
     dsum: Real,
     gc: [Real; 2],
     gu: [Real; 4],
 }
 
-/// Lane sums of one particle against the buffer (its own entry already moved away).
+/// Smallest r² > TINY2 of the lanes \[h²\] (∞ if none).
+#[inline(always)]
+fn r2min_of<L: Lanes>(acc: L) -> Real {
+    let m = acc.to_array().iter().fold(u32::MAX, |m, x| m.min(x.to_bits()));
+    if m == u32::MAX {
+        Real::INFINITY
+    } else {
+        f32::from_bits(m + R2_BIAS) as Real
+    }
+}
+
+/// Lane sums of particle `a` over the chunks of its cell, in two passes: pass 1 computes the pair
+/// geometry and kernel values of every lane into the scratch (√r² and 1/r run beside the kernel
+/// polynomial, so its dependency chains are short), pass 2 accumulates. One pass would stall: the
+/// ~70-cycle chain √ → kernel → ÷ of each chunk, with ~50 operations waiting on it, fills the
+/// out-of-order window after two chunks.
 ///
 /// # Safety
-/// `L::available()`; the buffer's x, z and first 5 (7 with `EX`) channels hold ≥ n8 values.
+/// `L::available()`; the slices of `inp` are padded with [`PAD`] entries; the scratch lanes hold
+/// 8 values per chunk.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
-    buf: &Buf,
-    n8: usize,
-    xa: f32,
-    za: f32,
-    uax: f32,
-    uaz: f32,
-    pa: f32,
-    deva: f32,
+    inp: &RatesIn,
+    sc: &mut Scratch,
+    shifted: bool,
+    a: usize,
     inv_fdp: f32,
 ) -> Sums {
-    let (xa, za, uax, uaz, pa) = (L::splat(xa), L::splat(za), L::splat(uax), L::splat(uaz), L::splat(pa));
-    let (deva, inv_fdp) = (L::splat(deva), L::splat(inv_fdp));
-    let (zero, eps, one, c02) = (L::splat(0.0), L::splat(0.01), L::splat(1.0), L::splat(0.2));
+    let pos = &inp.pos;
+    let (zero, eps, one, c02, tiny) = (L::splat(0.0), L::splat(0.01), L::splat(1.0), L::splat(0.2), L::splat(TINY2));
+    let (pxh, pxl, pz) = (pos.xh.as_ptr(), pos.xl.as_ptr(), pos.zr.as_ptr());
+    let [ldx, ldz, lf, lfr, lkk] = &mut sc.lane;
+    let (ldx, ldz, lf, lfr, lkk) =
+        (ldx.as_mut_ptr(), ldz.as_mut_ptr(), lf.as_mut_ptr(), lfr.as_mut_ptr(), lkk.as_mut_ptr());
+    let chunks = &sc.chunks;
+    assert!(sc.lane.iter().all(|l| l.len() >= 8 * chunks.len()));
+    // pass 1: geometry and kernel
+    let fr = frames(pos.xoh[a], &inp.frames.shifts, shifted);
+    let zra = L::splat(pos.zr[a]);
+    let mut r2min = L::splat(f32::from_bits(u32::MAX));
+    for (j, ck) in chunks.iter().enumerate() {
+        let i = ck.i as usize;
+        // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
+        let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
+        // SAFETY: L::available() (caller); k ≤ 8.
+        let mk = unsafe { mask::<L>(ck.k as usize) };
+        let fj = 2 * ck.frame as usize;
+        let dx = L::splat(fr[fj]).sub(ld(pxh)).add(L::splat(fr[fj + 1]).sub(ld(pxl)));
+        let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
+        let r2 = dz.mul_add(dz, dx.mul_add(dx, tiny));
+        r2min = r2min.min_bits_sub(r2.and(mk), R2_BIAS);
+        let rr = r2.sqrt();
+        let inv = one.div(rr);
+        let (f, d) = S::f_d(rr);
+        let (f, d) = (f.and(mk), d.and(mk));
+        // SAFETY: the scratch lanes hold 8 per chunk (asserted).
+        unsafe {
+            L::store(ldx.add(8 * j), dx);
+            L::store(ldz.add(8 * j), dz);
+            L::store(lf.add(8 * j), f);
+            L::store(lfr.add(8 * j), d.mul(inv));
+            if !MV || EX {
+                L::store(lkk.add(8 * j), d.mul(rr).div(r2.add(eps)));
+            }
+        }
+    }
+    // pass 2: sums
+    let (uax, uaz, pa) = (L::splat(inp.ch[0][a]), L::splat(inp.ch[1][a]), L::splat(inp.pr[a]));
+    let (deva, inv_fdp) = (L::splat(inp.ch[5][a]), L::splat(inv_fdp));
     let (mut drho, mut apx, mut apz, mut s1, mut s2, mut s3) = (zero, zero, zero, zero, zero, zero);
-    let mut r2min = L::splat(f32::INFINITY);
     let (mut dsum, mut gcx, mut gcz) = (zero, zero, zero);
     let (mut gu0, mut gu1, mut gu2, mut gu3) = (zero, zero, zero, zero);
-    let (px, pz) = (buf.x.as_ptr(), buf.z.as_ptr());
-    let [pux, puz, pmp, pm, pv, pdev, pvd] = [0, 1, 2, 3, 4, 5, 6].map(|c| buf.ch[c].as_ptr());
-    let mut i = 0;
-    while i < n8 {
-        // SAFETY: i + 8 ≤ n8 ≤ every used slice's length (caller).
+    let [pux, puz, pmp, pm, pv, pdev, pvd] = inp.ch.map(|c| c.as_ptr());
+    for (j, ck) in chunks.iter().enumerate() {
+        let i = ck.i as usize;
+        // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
         let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
-        let dx = xa.sub(ld(px));
-        let dz = za.sub(ld(pz));
-        let r2 = dz.mul_add(dz, dx.mul(dx));
-        r2min = r2min.min(r2);
-        let r = r2.sqrt();
-        let (f, d) = S::f_d(r);
-        let fr = d.div(r);
+        // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
+        let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
+        let (dx, dz, f, fr) = (lds(ldx), lds(ldz), lds(lf), lds(lfr));
         let (gx, gz) = (dx.mul(fr), dz.mul(fr));
         let dux = uax.sub(ld(pux));
         let duz = uaz.sub(ld(puz));
@@ -266,7 +383,7 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
         apx = pt.mul_add(gx, apx);
         apz = pt.mul_add(gz, apz);
         let v = ld(pv);
-        let kk = if MV && !EX { zero } else { d.mul(r).div(r2.add(eps)) };
+        let kk = if !MV || EX { lds(lkk) } else { zero };
         if MV {
             let vw = v.mul(f);
             s1 = dux.mul_add(vw, s1);
@@ -290,7 +407,6 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
             gu2 = duz.mul_add(vgx, gu2);
             gu3 = duz.mul_add(vgz, gu3);
         }
-        i += 8;
     }
     let mut s = Sums {
         drho: sum_f64(drho),
@@ -299,7 +415,7 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
         s1: sum_f64(s1),
         s2: sum_f64(s2),
         s3: sum_f64(s3),
-        r2min: min_lane(r2min),
+        r2min: r2min_of(r2min),
         ..Default::default()
     };
     if EX {
@@ -313,55 +429,47 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
 /// Rates of the particles of cells `c0..c1` into `out` (their sorted range).
 ///
 /// # Safety
-/// `L::available()`.
+/// `L::available()`; the slices of `inp` are padded with [`PAD`] entries.
 #[inline(always)]
 pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
     inp: &RatesIn,
     c0: usize,
     c1: usize,
     out: &mut [Rate],
-    buf: &mut Buf,
+    sc: &mut Scratch,
 ) {
     let k = &inp.k;
-    let base = inp.grid.range(c0).0;
-    let nch = if EX { NCH } else { 5 };
+    let grid = inp.pos.grid;
+    let base = grid.range(c0).0;
     for c in c0..c1 {
-        let (s, e) = inp.grid.range(c);
+        let (s, e) = grid.range(c);
         if inp.wall[s..e].iter().all(|&w| w) {
             out[s - base..e - base].fill(Rate::default());
             continue;
         }
-        let (n8, own) = buf.gather(inp.grid, c, inp.xs, inp.zs, &inp.ch[..nch], k.inv_h);
+        let shifted = sc.cell(grid, inp.frames, c);
         for a in s..e {
             if inp.wall[a] {
                 out[a - base] = Rate::default();
                 continue;
             }
-            let j = own + a - s;
-            let (xa, za) = (buf.x[j], buf.z[j]);
-            buf.x[j] = FAR;
-            buf.z[j] = FAR;
             let (ra, ma) = (inp.rho[a], inp.mass[a]);
             let inv_fdp =
                 if EX && k.shifting { (1.0 / (k.f_scalar)((ma / k.rho0).sqrt() * k.inv_h)) as f32 } else { 1.0 };
-            let deva = if EX { inp.ch[5][a] } else { 0.0 };
-            // SAFETY: L::available() (caller); gather sized x, z and the nch channels to n8.
-            let sm = unsafe {
-                pair_sums::<L, S, MV, EX>(buf, n8, xa, za, inp.ch[0][a], inp.ch[1][a], inp.pr[a], deva, inv_fdp)
-            };
-            buf.x[j] = xa;
-            buf.z[j] = za;
-            out[a - base] = finish::<S, MV, EX>(k, &sm, ra, ma / ra);
+            // SAFETY: L::available() and padding (caller).
+            let sm = unsafe { pair_sums::<L, S, MV, EX>(inp, sc, shifted, a, inv_fdp) };
+            out[a - base] = finish::<S, MV, EX>(k, &sm, ra);
         }
     }
 }
 
 /// Rate of one particle from its lane sums (f64).
 #[inline(always)]
-fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra: Real, va: Real) -> Rate {
+fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra: Real) -> Rate {
     let mut drho = k.grad * s.drho;
     let (avx, avz) = if MV {
-        let sc = -k.c_mu / ra / (va * k.f0 + s.s3);
+        // the own lane put V_a f_s(0) into s3: the self term of the Shepard denominator
+        let sc = -k.c_mu / ra / s.s3;
         (sc * s.s1, sc * s.s2)
     } else {
         let sc = 2.0 * k.mu / ra * (k.grad * k.inv_h);
@@ -370,7 +478,7 @@ fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra
     let mut rate = Rate {
         drho,
         acc: [avx - k.grad * s.apx + k.g[0], avz - k.grad * s.apz + k.g[1]],
-        r2min: if (s.r2min as Real) < S::CUT * S::CUT { s.r2min as Real * k.h * k.h } else { Real::INFINITY },
+        r2min: if s.r2min < S::CUT * S::CUT { s.r2min * k.h * k.h } else { Real::INFINITY },
         ..Default::default()
     };
     if EX {
@@ -388,17 +496,17 @@ fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra
 
 /// Sorted particle data and constants of the wall pass.
 pub(super) struct WallIn<'a> {
-    pub(super) grid: &'a Grid,
-    pub(super) xs: &'a [Real],
-    pub(super) zs: &'a [Real],
+    pub(super) pos: Pos<'a>,
+    pub(super) frames: &'a Frames,
     pub(super) kind: &'a [ParticleKind],
-    /// ux, uz, p, ρ, (1 non-wall, 0 wall) — f32.
+    /// ux, uz, p, ρ, (1 non-wall, 0 wall) — f32, padded.
     pub(super) ch: [&'a [f32]; 5],
-    /// Prescribed wall velocity (f64).
+    /// Sorted position → particle index.
+    pub(super) order: &'a [u32],
+    /// Prescribed wall velocity (f64, particle order).
     pub(super) vx: &'a [Real],
     pub(super) vz: &'a [Real],
     pub(super) h: Real,
-    pub(super) inv_h: Real,
     pub(super) g: [Real; 2],
     pub(super) rho0: Real,
     pub(super) c2: Real,
@@ -410,41 +518,46 @@ pub(super) struct WallIn<'a> {
 /// [`crate::wcsph::compute_rates`].
 ///
 /// # Safety
-/// `L::available()`.
+/// `L::available()`; the slices of `inp` are padded with [`PAD`] entries.
 #[inline(always)]
 pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
     inp: &WallIn,
     c0: usize,
     c1: usize,
     out: &mut [[Real; 4]],
-    buf: &mut Buf,
+    sc: &mut Scratch,
 ) {
-    let base = inp.grid.range(c0).0;
+    let grid = inp.pos.grid;
+    let base = grid.range(c0).0;
+    let (pxh, pxl, pz) = (inp.pos.xh.as_ptr(), inp.pos.xl.as_ptr(), inp.pos.zr.as_ptr());
+    let [pux, puz, pp, prho, pfl] = inp.ch.map(|c| c.as_ptr());
     for c in c0..c1 {
-        let (s, e) = inp.grid.range(c);
+        let (s, e) = grid.range(c);
         out[s - base..e - base].fill([0.0; 4]);
         if !inp.kind[s..e].iter().any(|k| k.is_wall()) {
             continue;
         }
-        let (n8, own) = buf.gather(inp.grid, c, inp.xs, inp.zs, &inp.ch, inp.inv_h);
-        let (px, pz) = (buf.x.as_ptr(), buf.z.as_ptr());
-        let [pux, puz, pp, prho, pfl] = [0, 1, 2, 3, 4].map(|c| buf.ch[c].as_ptr());
+        let shifted = sc.cell(grid, inp.frames, c);
         for w in s..e {
             if !inp.kind[w].is_wall() {
                 continue;
             }
-            let j = own + w - s;
-            let (xa, za) = (L::splat(buf.x[j]), L::splat(buf.z[j]));
             let zero = L::splat(0.0);
+            let tiny = L::splat(TINY2);
             let (mut sw, mut sux, mut suz, mut sp, mut srx, mut srz) = (zero, zero, zero, zero, zero, zero);
-            let mut i = 0;
-            while i < n8 {
-                // SAFETY: i + 8 ≤ n8 ≤ the buffer's lengths (gather); L::available() (caller).
+            let fr = frames(inp.pos.xoh[w], &inp.frames.shifts, shifted);
+            let zra = L::splat(inp.pos.zr[w]);
+            for ck in &sc.chunks {
+                let i = ck.i as usize;
+                // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
                 let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
-                let dx = xa.sub(ld(px));
-                let dz = za.sub(ld(pz));
-                let r = dz.mul_add(dz, dx.mul(dx)).sqrt();
-                let wf = S::f(r).mul(ld(pfl));
+                // SAFETY: L::available() (caller); k ≤ 8.
+                let mk = unsafe { mask::<L>(ck.k as usize) };
+                let j = 2 * ck.frame as usize;
+                let dx = L::splat(fr[j]).sub(ld(pxh)).add(L::splat(fr[j + 1]).sub(ld(pxl)));
+                let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
+                let rr = dz.mul_add(dz, dx.mul_add(dx, tiny)).sqrt();
+                let wf = S::f(rr).mul(ld(pfl)).and(mk);
                 sw = sw.add(wf);
                 sux = ld(pux).mul_add(wf, sux);
                 suz = ld(puz).mul_add(wf, suz);
@@ -452,10 +565,10 @@ pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
                 let rho = ld(prho);
                 srx = rho.mul(dx).mul_add(wf, srx);
                 srz = rho.mul(dz).mul_add(wf, srz);
-                i += 8;
             }
             let sw = sum_f64(sw);
-            let (vwx, vwz) = (inp.vx[w], inp.vz[w]);
+            let i = inp.order[w] as usize;
+            let (vwx, vwz) = (inp.vx[i], inp.vz[i]);
             out[w - base] = if sw > 0.0 {
                 let (sux, suz) = (sum_f64(sux), sum_f64(suz));
                 let sg = inp.h * (inp.g[0] * sum_f64(srx) + inp.g[1] * sum_f64(srz));
@@ -468,6 +581,84 @@ pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
             } else {
                 [vwx, vwz, inp.pb, inp.rho0]
             };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::neighbours::Period;
+
+    /// The chunk lists and frames of every cell give each particle exactly its neighbours within
+    /// the support (minimum image), each once, with (dx, dz) equal to the f64 minimum-image
+    /// difference to f32 accuracy — reach 1, 2, 3, every periodic combination.
+    #[test]
+    fn chunks_cover_every_neighbour_once_with_exact_images() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as Real / (1u64 << 53) as Real
+        };
+        let n = 700;
+        let x: Vec<Real> = (0..n).map(|_| 3.0 + rnd()).collect();
+        let z: Vec<Real> = (0..n).map(|_| rnd() * 0.7 - 0.2).collect();
+        let px = Some(Period { min: 3.0, length: 1.0 });
+        let pz = Some(Period { min: -0.2, length: 0.7 });
+        let (r, h) = (0.13, 0.05);
+        let inv_h = 1.0 / h;
+        for reach in [1, 2, 3] {
+            for (p, q) in [(None, None), (px, None), (None, pz), (px, pz)] {
+                let mut g = Grid::default();
+                assert!(g.build(&x, &z, r, reach, p, q));
+                let fr = Frames::new(&g, inv_h);
+                let order: Vec<usize> = g.order.iter().map(|&i| i as usize).collect();
+                let xoh: Vec<Real> = order.iter().map(|&i| x[i] * inv_h).collect();
+                let xh: Vec<f32> = xoh.iter().map(|&v| v as f32).collect();
+                let xl: Vec<f32> = xoh.iter().zip(&xh).map(|(&v, &hi)| (v - hi as Real) as f32).collect();
+                let mut zr = vec![0.0f32; n];
+                for c in 0..g.cells() {
+                    let (s, e) = g.range(c);
+                    for k in s..e {
+                        zr[k] = ((z[order[k]] - g.az_centre(c / g.ax.n)) * inv_h) as f32;
+                    }
+                }
+                let mut sc = Scratch::default();
+                for c in 0..g.cells() {
+                    let shifted = sc.cell(&g, &fr, c);
+                    let (s, e) = g.range(c);
+                    for ka in s..e {
+                        let a = order[ka];
+                        let f = frames(xoh[ka], &fr.shifts, shifted);
+                        let mut seen = Vec::new();
+                        for ck in &sc.chunks {
+                            for l in 0..ck.k as usize {
+                                let kb = ck.i as usize + l;
+                                let j = 2 * ck.frame as usize;
+                                let dx = (f[j] - xh[kb]) + (f[j + 1] - xl[kb]);
+                                let dz = (zr[ka] + ck.dz) - zr[kb];
+                                let b = order[kb];
+                                let ex = p.map_or(x[a] - x[b], |p| p.image(x[a] - x[b])) * inv_h;
+                                let ez = q.map_or(z[a] - z[b], |q| q.image(z[a] - z[b])) * inv_h;
+                                if ex * ex + ez * ez < (r * inv_h).powi(2) {
+                                    assert!((dx as Real - ex).abs() < 1e-6 && (dz as Real - ez).abs() < 1e-6);
+                                    seen.push(b);
+                                }
+                            }
+                        }
+                        seen.sort_unstable();
+                        let mut want: Vec<usize> = (0..n)
+                            .filter(|&b| {
+                                let dx = p.map_or(x[a] - x[b], |p| p.image(x[a] - x[b]));
+                                let dz = q.map_or(z[a] - z[b], |q| q.image(z[a] - z[b]));
+                                dx * dx + dz * dz < r * r
+                            })
+                            .collect();
+                        want.sort_unstable();
+                        assert_eq!(seen, want, "particle {a} reach {reach} periodic {p:?} {q:?}");
+                    }
+                }
+            }
         }
     }
 }

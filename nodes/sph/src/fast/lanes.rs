@@ -1,6 +1,6 @@
 //! Eight f32 lanes: a portable array type and an AVX2 + FMA register type with exactly the same IEEE
-//! operations (`+ − × ÷ √` correctly rounded, fused multiply-add with one rounding, `max`/`min` as
-//! `a > b ? a : b` / `a < b ? a : b`), so a kernel written once over [`Lanes`] gives the same bits
+//! operations (`+ − × ÷ √` correctly rounded, fused multiply-add with one rounding, `max` as `a > b ? a : b`,
+//! bitwise and, unsigned integer min), so a kernel written once over [`Lanes`] gives the same bits
 //! with either type.
 
 /// Eight f32 lanes.
@@ -18,6 +18,11 @@ pub(super) unsafe trait Lanes: Copy {
     /// # Safety
     /// `p` points to 8 readable f32.
     unsafe fn load(p: *const f32) -> Self;
+    /// Stores 8 consecutive f32.
+    ///
+    /// # Safety
+    /// `p` points to 8 writable f32.
+    unsafe fn store(p: *mut f32, v: Self);
     /// `self + o`.
     fn add(self, o: Self) -> Self;
     /// `self − o`.
@@ -30,10 +35,12 @@ pub(super) unsafe trait Lanes: Copy {
     fn mul_add(self, b: Self, c: Self) -> Self;
     /// `self > o ? self : o`.
     fn max(self, o: Self) -> Self;
-    /// `self < o ? self : o`.
-    fn min(self, o: Self) -> Self;
     /// √self.
     fn sqrt(self) -> Self;
+    /// Bitwise `self & o`.
+    fn and(self, o: Self) -> Self;
+    /// Lanes as u32 bit patterns: `min(self, bits(x) − k)` (unsigned, wrapping subtraction).
+    fn min_bits_sub(self, x: Self, k: u32) -> Self;
     /// The lanes in order.
     fn to_array(self) -> [f32; 8];
 }
@@ -42,12 +49,6 @@ pub(super) unsafe trait Lanes: Copy {
 #[inline(always)]
 pub(super) fn sum_f64<L: Lanes>(v: L) -> f64 {
     v.to_array().iter().fold(0.0, |s, &x| s + x as f64)
-}
-
-/// Smallest lane.
-#[inline(always)]
-pub(super) fn min_lane<L: Lanes>(v: L) -> f32 {
-    v.to_array().iter().fold(f32::INFINITY, |s, &x| if x < s { x } else { s })
 }
 
 /// Portable twin: an array of 8 f32, lane by lane.
@@ -75,6 +76,11 @@ unsafe impl Lanes for Portable {
         Portable(unsafe { std::ptr::read_unaligned(p.cast::<[f32; 8]>()) })
     }
     #[inline(always)]
+    unsafe fn store(p: *mut f32, v: Self) {
+        // SAFETY: the caller guarantees 8 writable f32 at p.
+        unsafe { std::ptr::write_unaligned(p.cast::<[f32; 8]>(), v.0) }
+    }
+    #[inline(always)]
     fn add(self, o: Self) -> Self {
         Portable(zip(self.0, o.0, |a, b| a + b))
     }
@@ -99,12 +105,16 @@ unsafe impl Lanes for Portable {
         Portable(zip(self.0, o.0, |a, b| if a > b { a } else { b }))
     }
     #[inline(always)]
-    fn min(self, o: Self) -> Self {
-        Portable(zip(self.0, o.0, |a, b| if a < b { a } else { b }))
-    }
-    #[inline(always)]
     fn sqrt(self) -> Self {
         Portable(self.0.map(f32::sqrt))
+    }
+    #[inline(always)]
+    fn and(self, o: Self) -> Self {
+        Portable(zip(self.0, o.0, |a, b| f32::from_bits(a.to_bits() & b.to_bits())))
+    }
+    #[inline(always)]
+    fn min_bits_sub(self, x: Self, k: u32) -> Self {
+        Portable(zip(self.0, x.0, |a, b| f32::from_bits(a.to_bits().min(b.to_bits().wrapping_sub(k)))))
     }
     #[inline(always)]
     fn to_array(self) -> [f32; 8] {
@@ -144,6 +154,11 @@ mod avx {
             Avx(unsafe { _mm256_loadu_ps(p) })
         }
         #[inline(always)]
+        unsafe fn store(p: *mut f32, v: Self) {
+            // SAFETY: 8 writable f32 at p (caller); AVX (impl contract).
+            unsafe { _mm256_storeu_ps(p, v.0) }
+        }
+        #[inline(always)]
         fn add(self, o: Self) -> Self {
             // SAFETY: see the impl.
             Avx(unsafe { _mm256_add_ps(self.0, o.0) })
@@ -175,14 +190,22 @@ mod avx {
             Avx(unsafe { _mm256_max_ps(self.0, o.0) })
         }
         #[inline(always)]
-        fn min(self, o: Self) -> Self {
-            // SAFETY: see the impl.
-            Avx(unsafe { _mm256_min_ps(self.0, o.0) })
-        }
-        #[inline(always)]
         fn sqrt(self) -> Self {
             // SAFETY: see the impl.
             Avx(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            // SAFETY: see the impl.
+            Avx(unsafe { _mm256_and_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn min_bits_sub(self, x: Self, k: u32) -> Self {
+            // SAFETY: see the impl.
+            unsafe {
+                let d = _mm256_sub_epi32(_mm256_castps_si256(x.0), _mm256_set1_epi32(k as i32));
+                Avx(_mm256_castsi256_ps(_mm256_min_epu32(_mm256_castps_si256(self.0), d)))
+            }
         }
         #[inline(always)]
         fn to_array(self) -> [f32; 8] {
@@ -237,17 +260,17 @@ mod tests {
                 (pa.div(pb).to_array(), va.div(vb).to_array()),
                 (pa.mul_add(pb, pc).to_array(), va.mul_add(vb, vc).to_array()),
                 (pa.max(pb).to_array(), va.max(vb).to_array()),
-                (pa.min(pb).to_array(), va.min(vb).to_array()),
                 (pa.sqrt().to_array(), va.sqrt().to_array()),
+                (pa.and(pb).to_array(), va.and(vb).to_array()),
+                (pa.min_bits_sub(pb, 0x1234_5678).to_array(), va.min_bits_sub(vb, 0x1234_5678).to_array()),
                 (Portable::splat(a[0]).to_array(), Avx::splat(a[0]).to_array()),
             ];
             for (op, (p, v)) in pairs.iter().enumerate() {
-                // NaN payloads may differ; NaN-ness may not.
-                let canon = |x: [f32; 8]| x.map(|y| if y.is_nan() { u32::MAX } else { y.to_bits() });
+                // Arithmetic: NaN payloads may differ, NaN-ness may not; bitwise operations: exact.
+                let canon = |x: [f32; 8]| x.map(|y| if y.is_nan() && op < 7 { u32::MAX } else { y.to_bits() });
                 assert_eq!(canon(*p), canon(*v), "op {op} on {a:?} {b:?} {c:?}: {:?} vs {:?}", bits(*p), bits(*v));
             }
             assert_eq!(sum_f64(pa).to_bits(), sum_f64(va).to_bits());
-            assert_eq!(min_lane(pa).to_bits(), min_lane(va).to_bits());
         }
     }
 }

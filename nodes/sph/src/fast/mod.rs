@@ -29,7 +29,7 @@ mod kernels;
 mod lanes;
 
 use grid::Grid;
-use kernels::{Buf, Cubic, Quartic, RateConsts, RatesIn, Shape, WallIn, Wendland, NCH};
+use kernels::{Cubic, Frames, Pos, Quartic, RateConsts, RatesIn, Scratch, Shape, WallIn, Wendland, PAD};
 use lanes::{Lanes, Portable};
 
 use crate::kernel::{Kernel, KernelKind};
@@ -49,10 +49,25 @@ pub enum Backend {
     Portable,
 }
 
-/// Cells per support radius of the fast grid (cells of side ≥ support / `REACH`).
-const REACH: usize = 1;
+/// Default cells per support radius of the fast grid (cells of side ≥ support / reach, neighbours
+/// reach cells on each side): 2 runs ~30 % fewer candidate lanes than 1 (measured, `PERF.md`);
+/// 3 has fewer lanes still but one particle per cell, and the per-cell work then dominates.
+const REACH: usize = 2;
 /// Blocks of cells handed to the threads hold at least this many particles.
 const BLOCK_PARTICLES: usize = 384;
+
+/// f32 channels of the sorted particles.
+const UX: usize = 0;
+const UZ: usize = 1;
+const MP: usize = 2;
+const M: usize = 3;
+const V: usize = 4;
+const DEV: usize = 5;
+const VD: usize = 6;
+const P: usize = 7;
+const RHO: usize = 8;
+const FL: usize = 9;
+const NCH: usize = 10;
 
 /// Caller-owned scratch of the fast evaluator (no allocation once warmed up, except one small
 /// vector of block slices per pass).
@@ -60,33 +75,36 @@ const BLOCK_PARTICLES: usize = 384;
 pub struct FastWorkspace {
     grid: Grid,
     blocks: Vec<(usize, usize)>,
-    xs: Vec<Real>,
-    zs: Vec<Real>,
+    /// x/h (f64) and its f32 hi and lo parts, z relative to the cell row centre / h.
+    xoh: Vec<Real>,
+    xh: Vec<f32>,
+    xl: Vec<f32>,
+    zr: Vec<f32>,
     kind: Vec<ParticleKind>,
     wall: Vec<bool>,
-    vx: Vec<Real>,
-    vz: Vec<Real>,
     rho: Vec<Real>,
-    p: Vec<Real>,
     mass: Vec<Real>,
-    /// f32 channels: wall pass (ux, uz, p, ρ, non-wall flag), then rate pass (ux, uz, m p/ρ², m,
-    /// m/ρ, ρ − ρ₀, non-wall m/ρ).
+    /// ux, uz, m p/ρ², m, m/ρ, ρ − ρ₀, m/ρ of non-walls (0 for walls), p, ρ, non-wall flag.
     ch: [Vec<f32>; NCH],
+    /// p/ρ².
     pr: Vec<f32>,
     wall_out: Vec<[Real; 4]>,
     rates: Vec<Rate>,
+    frames: Frames,
     any_wall: bool,
     cells: CellList,
+    /// Cells per support radius; 0 = [`REACH`].
+    reach: usize,
 }
 
 thread_local! {
-    static BUF: std::cell::RefCell<Buf> = std::cell::RefCell::new(Buf::default());
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// [`crate::wcsph::compute_rates`] computed by the fast evaluator: same outputs (`ws.ux`, `uz`, `p`,
 /// `rho`, `rates`) to f32 accuracy (see the module doc), with its own cell grid at the kernel support
 /// (no [`CellList`] needed). Falls back to the reference where the fast grid does not apply (a
-/// periodic axis shorter than 3 cells).
+/// periodic axis shorter than 2 `REACH` + 1 cells, impossible with validated parameters).
 pub fn compute_rates(
     params: &SphParams,
     kernel: &Kernel,
@@ -110,19 +128,19 @@ pub fn compute_rates_with(
 ) {
     let support = kernel.support_radius();
     let (px, pz) = (params.periodic_x, params.periodic_z);
-    if particles.is_empty() || !fws.grid.build(&particles.x, &particles.z, support, REACH, px, pz) {
+    let reach = fws.reach();
+    if particles.is_empty() || !fws.grid.build(&particles.x, &particles.z, support, reach, px, pz) {
         fws.cells.build(&particles.x, &particles.z, support, px, pz);
         wcsph::compute_rates(params, kernel, particles, &fws.cells, g, ws);
         return;
     }
     let avx = backend == Backend::Auto && avx_available();
-    fws.sort(params, particles);
+    fws.sort(params, kernel, particles);
     if fws.any_wall {
-        fws.wall_pass(params, kernel, g, avx);
+        fws.wall_pass(params, kernel, particles, g, avx);
     }
-    fws.derive(params);
     fws.rate_pass(params, kernel, g, avx);
-    fws.scatter(ws);
+    fws.scatter(params, particles, ws);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -164,41 +182,72 @@ fn for_blocks<T: Send>(
 }
 
 impl FastWorkspace {
-    /// Sorted copies of the particle data, wall-pass channels, blocks.
-    fn sort(&mut self, params: &SphParams, p: &Particles) {
-        let order = &self.grid.order;
-        macro_rules! gather {
-            ($dst:expr, $src:expr) => {{
-                $dst.clear();
-                $dst.extend(order.iter().map(|&i| $src[i as usize]));
-            }};
+    /// A workspace whose grid has `reach` (clamped to 1..=4) cells per kernel support radius
+    /// (default 2). The results differ between reaches only by rounding (the lanes are summed in
+    /// another order); for a given reach they are bit-identical for any thread count.
+    pub fn with_reach(reach: usize) -> Self {
+        FastWorkspace { reach: reach.clamp(1, 4), ..Default::default() }
+    }
+
+    fn reach(&self) -> usize {
+        if self.reach == 0 {
+            REACH
+        } else {
+            self.reach
         }
-        gather!(self.xs, p.x);
-        gather!(self.zs, p.z);
-        gather!(self.kind, p.kind);
-        gather!(self.vx, p.vx);
-        gather!(self.vz, p.vz);
-        gather!(self.rho, p.rho);
-        gather!(self.mass, p.mass);
-        self.wall.clear();
-        self.wall.extend(self.kind.iter().map(|k| k.is_wall()));
-        self.any_wall = self.wall.iter().any(|&w| w);
-        self.p.clear();
-        self.p.extend(self.rho.iter().map(|&r| pressure(params, r)));
-        let n = self.xs.len();
-        for ch in &mut self.ch {
-            ch.resize(n, 0.0);
+    }
+
+    /// Sorted, padded copies of the particle data with the per-particle quantities of the pair
+    /// terms; blocks of cells.
+    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) {
+        let n = p.len();
+        let inv_h = 1.0 / kernel.h;
+        for v in [&mut self.xh, &mut self.xl, &mut self.zr, &mut self.pr].into_iter().chain(&mut self.ch) {
+            v.clear();
+            v.resize(n + PAD, 0.0);
         }
-        if self.any_wall {
-            let [ux, uz, pc, rc, fl, ..] = &mut self.ch;
-            for k in 0..n {
-                ux[k] = self.vx[k] as f32;
-                uz[k] = self.vz[k] as f32;
-                pc[k] = self.p[k] as f32;
-                rc[k] = self.rho[k] as f32;
-                fl[k] = if self.wall[k] { 0.0 } else { 1.0 };
+        self.xoh.resize(n, 0.0);
+        self.rho.resize(n, 0.0);
+        self.mass.resize(n, 0.0);
+        self.kind.resize(n, ParticleKind::Fluid);
+        self.wall.resize(n, false);
+        let grid = &self.grid;
+        let nx = grid.ax.n;
+        let [ux, uz, mp, m, v, dev, vd, pc, rc, fl] = &mut self.ch;
+        for c in 0..grid.cells() {
+            let (s, e) = grid.range(c);
+            let zc = grid.az_centre(c / nx);
+            for k in s..e {
+                let i = grid.order[k] as usize;
+                let (r, mk, kd) = (p.rho[i], p.mass[i], p.kind[i]);
+                let xo = p.x[i] * inv_h;
+                let hi = xo as f32;
+                self.xoh[k] = xo;
+                self.xh[k] = hi;
+                self.xl[k] = (xo - hi as Real) as f32;
+                self.zr[k] = ((p.z[i] - zc) * inv_h) as f32;
+                self.rho[k] = r;
+                self.mass[k] = mk;
+                self.kind[k] = kd;
+                let w = kd.is_wall();
+                self.wall[k] = w;
+                let pk = pressure(params, r);
+                let prk = pk / (r * r);
+                ux[k] = p.vx[i] as f32;
+                uz[k] = p.vz[i] as f32;
+                mp[k] = (mk * prk) as f32;
+                m[k] = mk as f32;
+                v[k] = (mk / r) as f32;
+                dev[k] = (r - params.rho0) as f32;
+                vd[k] = if w { 0.0 } else { v[k] };
+                pc[k] = pk as f32;
+                rc[k] = r as f32;
+                fl[k] = if w { 0.0 } else { 1.0 };
+                self.pr[k] = prk as f32;
             }
         }
+        self.any_wall = self.wall.iter().any(|&w| w);
+        self.frames = Frames::new(&self.grid, inv_h);
         self.blocks.clear();
         let (mut c0, mut count) = (0, 0);
         for c in 0..self.grid.cells() {
@@ -214,74 +263,55 @@ impl FastWorkspace {
         }
     }
 
-    /// Wall particles' velocity, pressure and density (sorted `vx`, `vz`, `p`, `rho` updated).
-    fn wall_pass(&mut self, params: &SphParams, kernel: &Kernel, g: [Real; 2], avx: bool) {
-        let n = self.xs.len();
+    /// Wall particles' velocity, pressure and density, then their rate-pass channels.
+    fn wall_pass(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles, g: [Real; 2], avx: bool) {
+        let n = self.xoh.len();
         self.wall_out.resize(n, [0.0; 4]);
-        let [ux, uz, pc, rc, fl, ..] = &self.ch;
         let inp = WallIn {
-            grid: &self.grid,
-            xs: &self.xs,
-            zs: &self.zs,
+            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.xh, xl: &self.xl, zr: &self.zr },
+            frames: &self.frames,
             kind: &self.kind,
-            ch: [ux, uz, pc, rc, fl],
-            vx: &self.vx,
-            vz: &self.vz,
+            ch: [&self.ch[UX], &self.ch[UZ], &self.ch[P], &self.ch[RHO], &self.ch[FL]],
+            order: &self.grid.order,
+            vx: &p.vx,
+            vz: &p.vz,
             h: kernel.h,
-            inv_h: 1.0 / kernel.h,
             g,
             rho0: params.rho0,
             c2: params.c * params.c,
             pb: params.background_pressure,
         };
+        let (par, b, out) = (params.parallel, &self.blocks[..], &mut self.wall_out[..]);
         match kernel.kind {
-            KernelKind::QuarticSpline => {
-                wall_run::<Quartic>(&inp, params.parallel, avx, &self.blocks, &mut self.wall_out)
-            }
-            KernelKind::WendlandC2 => {
-                wall_run::<Wendland>(&inp, params.parallel, avx, &self.blocks, &mut self.wall_out)
-            }
-            KernelKind::CubicSpline => wall_run::<Cubic>(&inp, params.parallel, avx, &self.blocks, &mut self.wall_out),
+            KernelKind::QuarticSpline => wall_run::<Quartic>(&inp, par, avx, b, out),
+            KernelKind::WendlandC2 => wall_run::<Wendland>(&inp, par, avx, b, out),
+            KernelKind::CubicSpline => wall_run::<Cubic>(&inp, par, avx, b, out),
         }
+        let [ux, uz, mp, _, v, dev, ..] = &mut self.ch;
         for k in 0..n {
             if self.wall[k] {
-                let [u, v, p, r] = self.wall_out[k];
-                self.vx[k] = u;
-                self.vz[k] = v;
-                self.p[k] = p;
-                self.rho[k] = r;
+                let [u, w, pw, rw] = self.wall_out[k];
+                let prk = pw / (rw * rw);
+                ux[k] = u as f32;
+                uz[k] = w as f32;
+                mp[k] = (self.mass[k] * prk) as f32;
+                v[k] = (self.mass[k] / rw) as f32;
+                dev[k] = (rw - params.rho0) as f32;
+                self.pr[k] = prk as f32;
+                self.rho[k] = rw;
             }
-        }
-    }
-
-    /// Rate-pass channels from the (wall-updated) sorted data.
-    fn derive(&mut self, params: &SphParams) {
-        let n = self.xs.len();
-        self.pr.resize(n, 0.0);
-        let [ux, uz, mp, m, v, dev, vd] = &mut self.ch;
-        for k in 0..n {
-            let (r, mk) = (self.rho[k], self.mass[k]);
-            let pr = self.p[k] / (r * r);
-            ux[k] = self.vx[k] as f32;
-            uz[k] = self.vz[k] as f32;
-            mp[k] = (mk * pr) as f32;
-            m[k] = mk as f32;
-            v[k] = (mk / r) as f32;
-            dev[k] = (r - params.rho0) as f32;
-            vd[k] = if self.wall[k] { 0.0 } else { v[k] };
-            self.pr[k] = pr as f32;
         }
     }
 
     fn rate_pass(&mut self, params: &SphParams, kernel: &Kernel, g: [Real; 2], avx: bool) {
-        let n = self.xs.len();
+        let n = self.xoh.len();
         self.rates.resize(n, Rate::default());
         let h = kernel.h;
         let kind = kernel.kind;
-        let (fs, ds) = match kind {
-            KernelKind::QuarticSpline => (Quartic::FS, Quartic::DS),
-            KernelKind::WendlandC2 => (Wendland::FS, Wendland::DS),
-            KernelKind::CubicSpline => (Cubic::FS, Cubic::DS),
+        let ds = match kind {
+            KernelKind::QuarticSpline => Quartic::DS,
+            KernelKind::WendlandC2 => Wendland::DS,
+            KernelKind::CubicSpline => Cubic::DS,
         };
         let f_scalar: fn(Real) -> Real = match kind {
             KernelKind::QuarticSpline => |q| KernelKind::QuarticSpline.shape(q).0 / Quartic::FS,
@@ -292,7 +322,6 @@ impl FastWorkspace {
             h,
             inv_h: 1.0 / h,
             grad: kind.sigma_2d() / (h * h * h) * ds,
-            f0: kind.shape(0.0).0 / fs,
             c_mu: mean_value_constant(kernel, params.viscous_constant) * params.mu,
             mu: params.mu,
             delta_hc2: 2.0 * params.density_diffusion * h * params.c,
@@ -301,13 +330,12 @@ impl FastWorkspace {
             g,
             f_scalar,
         };
-        let [ux, uz, mp, m, v, dev, vd] = &self.ch;
+        let c = &self.ch;
         let inp = RatesIn {
-            grid: &self.grid,
-            xs: &self.xs,
-            zs: &self.zs,
+            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.xh, xl: &self.xl, zr: &self.zr },
+            frames: &self.frames,
             wall: &self.wall,
-            ch: [ux, uz, mp, m, v, dev, vd],
+            ch: [&c[UX], &c[UZ], &c[MP], &c[M], &c[V], &c[DEV], &c[VD]],
             pr: &self.pr,
             rho: &self.rho,
             mass: &self.mass,
@@ -333,26 +361,31 @@ impl FastWorkspace {
         }
     }
 
-    /// Results back in the particles' order.
-    fn scatter(&self, ws: &mut Workspace) {
+    /// Results in the particles' order: the particles' own state, the walls' interpolated one, the
+    /// rates.
+    fn scatter(&self, params: &SphParams, p: &Particles, ws: &mut Workspace) {
+        ws.ux.clone_from(&p.vx);
+        ws.uz.clone_from(&p.vz);
+        ws.rho.clone_from(&p.rho);
+        ws.p.clear();
+        ws.p.extend(p.rho.iter().map(|&r| pressure(params, r)));
         let rank = &self.grid.rank;
-        macro_rules! put {
-            ($dst:expr, $src:expr) => {{
-                $dst.clear();
-                $dst.extend(rank.iter().map(|&k| $src[k as usize]));
-            }};
+        if self.any_wall {
+            for (i, &k) in rank.iter().enumerate() {
+                if p.kind[i].is_wall() {
+                    let [u, w, pw, rw] = self.wall_out[k as usize];
+                    (ws.ux[i], ws.uz[i], ws.p[i], ws.rho[i]) = (u, w, pw, rw);
+                }
+            }
         }
-        put!(ws.rates, self.rates);
-        put!(ws.ux, self.vx);
-        put!(ws.uz, self.vz);
-        put!(ws.p, self.p);
-        put!(ws.rho, self.rho);
+        ws.rates.clear();
+        ws.rates.extend(rank.iter().map(|&k| self.rates[k as usize]));
     }
 }
 
 fn wall_run<S: Shape>(inp: &WallIn, parallel: bool, avx: bool, blocks: &[(usize, usize)], out: &mut [[Real; 4]]) {
-    for_blocks(parallel, inp.grid, blocks, out, |c0, c1, o| {
-        BUF.with(|b| {
+    for_blocks(parallel, inp.pos.grid, blocks, out, |c0, c1, o| {
+        SCRATCH.with(|b| {
             let buf = &mut b.borrow_mut();
             #[cfg(target_arch = "x86_64")]
             if avx {
@@ -374,8 +407,8 @@ fn rate_run<S: Shape, const MV: bool, const EX: bool>(
     blocks: &[(usize, usize)],
     out: &mut [Rate],
 ) {
-    for_blocks(parallel, inp.grid, blocks, out, |c0, c1, o| {
-        BUF.with(|b| {
+    for_blocks(parallel, inp.pos.grid, blocks, out, |c0, c1, o| {
+        SCRATCH.with(|b| {
             let buf = &mut b.borrow_mut();
             #[cfg(target_arch = "x86_64")]
             if avx {
@@ -399,7 +432,7 @@ unsafe fn rates_avx<S: Shape, const MV: bool, const EX: bool>(
     c0: usize,
     c1: usize,
     out: &mut [Rate],
-    buf: &mut Buf,
+    buf: &mut Scratch,
 ) {
     // SAFETY: AVX2 and FMA (caller).
     unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
@@ -409,7 +442,7 @@ unsafe fn rates_avx<S: Shape, const MV: bool, const EX: bool>(
 /// The CPU supports AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn wall_avx<S: Shape>(inp: &WallIn, c0: usize, c1: usize, out: &mut [[Real; 4]], buf: &mut Buf) {
+unsafe fn wall_avx<S: Shape>(inp: &WallIn, c0: usize, c1: usize, out: &mut [[Real; 4]], buf: &mut Scratch) {
     // SAFETY: AVX2 and FMA (caller).
     unsafe { kernels::wall_cells::<lanes::Avx, S>(inp, c0, c1, out, buf) }
 }
