@@ -11,6 +11,7 @@ use crate::Real;
 pub(super) struct Axis {
     origin: Real,
     pub(super) cell: Real,
+    inv_cell: Real,
     pub(super) n: usize,
     /// Period length when periodic.
     period: Option<Real>,
@@ -22,20 +23,28 @@ impl Axis {
         match periodic {
             Some(p) => {
                 let n = ((p.length / cell).floor() as usize).max(1);
-                Axis { origin: p.min, cell: p.length / n as Real, n, period: Some(p.length) }
+                let cell = p.length / n as Real;
+                Axis { origin: p.min, cell, inv_cell: 1.0 / cell, n, period: Some(p.length) }
             }
             None => {
                 let (lo, hi) = min_max(v);
-                Axis { origin: lo, cell, n: ((hi - lo) / cell).floor() as usize + 1, period: None }
+                Axis {
+                    origin: lo,
+                    cell,
+                    inv_cell: 1.0 / cell,
+                    n: ((hi - lo) / cell).floor() as usize + 1,
+                    period: None,
+                }
             }
         }
     }
 
-    /// Cell of coordinate v, clamped to the grid (as `CellList`; `y.max(0) as usize` is
-    /// `floor(y).max(0) as usize` for every y, NaN included, without a libm call).
+    /// Cell of coordinate v, clamped to the grid (`y.max(0) as usize` is `floor(y).max(0) as usize`
+    /// for every y, NaN included, without a libm call). A coordinate within rounding of a cell
+    /// boundary may land in either cell: harmless, the pair terms vanish at the support radius.
     #[inline]
     fn coord(&self, v: Real) -> usize {
-        (((v - self.origin) / self.cell).max(0.0) as usize).min(self.n - 1)
+        (((v - self.origin) * self.inv_cell).max(0.0) as usize).min(self.n - 1)
     }
 
     /// The cells within `reach` of cell `i` as ≤ 2 segments (first, last, shift) of consecutive

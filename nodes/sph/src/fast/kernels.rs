@@ -143,7 +143,9 @@ pub(super) struct Chunk {
 /// [`pair_sums`]).
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
+    /// `chunks[..n]` are the cell's chunks.
     chunks: Vec<Chunk>,
+    n: usize,
     /// dx, dz, f_s, d_s/r, d_s r/(r² + 0.01) per lane.
     lane: [Vec<f32>; 5],
 }
@@ -168,7 +170,9 @@ impl Frames {
 }
 
 impl Scratch {
-    /// Chunks of cell `c`; returns true when some use a shifted x frame.
+    /// Chunks of cell `c` into `self.chunks[..self.n]`; returns true when some use a shifted x
+    /// frame. Runs of ≤ 16 particles (nearly all) take no data-dependent branch: two chunk slots
+    /// are written and ⌈len/8⌉ of them kept.
     #[inline]
     fn cell(&mut self, grid: &Grid, fr: &Frames, c: usize) -> bool {
         let nx = grid.ax.n;
@@ -176,9 +180,9 @@ impl Scratch {
         let (cx, cz) = (c % nx, c / nx);
         let (cols, nc) = grid.ax.segments(cx, reach);
         let (rows, nr) = grid.az.segments(cz, reach);
-        self.chunks.clear();
         let starts = &grid.cell_start;
         let nz = grid.az.n as isize;
+        let mut n = 0;
         for &(z0, z1, sz) in &rows[..nr] {
             // row offset of the image of row jz: jz − cz (± nz for a periodic image)
             let wrap = if sz < 0.0 {
@@ -200,16 +204,30 @@ impl Scratch {
                     } else {
                         2
                     };
-                    let (mut i, e) = (starts[base + x0] as usize, starts[base + x1 + 1] as usize);
-                    while i < e {
-                        let k = (e - i).min(8);
-                        self.chunks.push(Chunk { i: i as u32, k: k as u8, frame, dz });
-                        i += k;
+                    let (s, e) = (starts[base + x0] as usize, starts[base + x1 + 1] as usize);
+                    let len = e - s;
+                    if self.chunks.len() < n + len.div_ceil(8) + 2 {
+                        self.chunks.resize(n + len.div_ceil(8) + 16, Chunk::default());
+                    }
+                    if len <= 16 {
+                        let k1 = len.min(8);
+                        self.chunks[n] = Chunk { i: s as u32, k: k1 as u8, frame, dz };
+                        self.chunks[n + 1] = Chunk { i: (s + 8) as u32, k: (len - k1) as u8, frame, dz };
+                        n += len.div_ceil(8);
+                    } else {
+                        let mut i = s;
+                        while i < e {
+                            let k = (e - i).min(8);
+                            self.chunks[n] = Chunk { i: i as u32, k: k as u8, frame, dz };
+                            n += 1;
+                            i += k;
+                        }
                     }
                 }
             }
         }
-        let n8 = 8 * self.chunks.len();
+        self.n = n;
+        let n8 = 8 * n;
         for l in &mut self.lane {
             if l.len() < n8 {
                 l.resize(n8, 0.0);
@@ -297,7 +315,7 @@ struct Sums {
 /// Smallest r² > TINY2 of the lanes \[h²\] (∞ if none).
 #[inline(always)]
 fn r2min_of<L: Lanes>(acc: L) -> Real {
-    let m = acc.to_array().iter().fold(u32::MAX, |m, x| m.min(x.to_bits()));
+    let m = acc.min_bits();
     if m == u32::MAX {
         Real::INFINITY
     } else {
@@ -328,7 +346,7 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
     let [ldx, ldz, lf, lfr, lkk] = &mut sc.lane;
     let (ldx, ldz, lf, lfr, lkk) =
         (ldx.as_mut_ptr(), ldz.as_mut_ptr(), lf.as_mut_ptr(), lfr.as_mut_ptr(), lkk.as_mut_ptr());
-    let chunks = &sc.chunks;
+    let chunks = &sc.chunks[..sc.n];
     assert!(sc.lane.iter().all(|l| l.len() >= 8 * chunks.len()));
     // pass 1: geometry and kernel
     let fr = frames(pos.xoh[a], &inp.frames.shifts, shifted);
@@ -547,7 +565,7 @@ pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
             let (mut sw, mut sux, mut suz, mut sp, mut srx, mut srz) = (zero, zero, zero, zero, zero, zero);
             let fr = frames(inp.pos.xoh[w], &inp.frames.shifts, shifted);
             let zra = L::splat(inp.pos.zr[w]);
-            for ck in &sc.chunks {
+            for ck in &sc.chunks[..sc.n] {
                 let i = ck.i as usize;
                 // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
                 let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
@@ -631,7 +649,7 @@ mod tests {
                         let a = order[ka];
                         let f = frames(xoh[ka], &fr.shifts, shifted);
                         let mut seen = Vec::new();
-                        for ck in &sc.chunks {
+                        for ck in &sc.chunks[..sc.n] {
                             for l in 0..ck.k as usize {
                                 let kb = ck.i as usize + l;
                                 let j = 2 * ck.frame as usize;

@@ -41,14 +41,20 @@ pub(super) unsafe trait Lanes: Copy {
     fn and(self, o: Self) -> Self;
     /// Lanes as u32 bit patterns: `min(self, bits(x) − k)` (unsigned, wrapping subtraction).
     fn min_bits_sub(self, x: Self, k: u32) -> Self;
-    /// The lanes in order.
+    /// The lanes in order (tests).
+    #[cfg(test)]
     fn to_array(self) -> [f32; 8];
+    /// Sum of the lanes in f64 in a fixed order: s_i = l_i + l_(i+4) (i < 4), t_j = s_j + s_(j+2)
+    /// (j < 2), t_0 + t_1.
+    fn sum_f64(self) -> f64;
+    /// Smallest lane as u32 bit patterns.
+    fn min_bits(self) -> u32;
 }
 
-/// Sum of the lanes in f64, in lane order (the same for every implementation).
+/// Sum of the lanes in f64 (see [`Lanes::sum_f64`]).
 #[inline(always)]
 pub(super) fn sum_f64<L: Lanes>(v: L) -> f64 {
-    v.to_array().iter().fold(0.0, |s, &x| s + x as f64)
+    v.sum_f64()
 }
 
 /// Portable twin: an array of 8 f32, lane by lane.
@@ -116,9 +122,19 @@ unsafe impl Lanes for Portable {
     fn min_bits_sub(self, x: Self, k: u32) -> Self {
         Portable(zip(self.0, x.0, |a, b| f32::from_bits(a.to_bits().min(b.to_bits().wrapping_sub(k)))))
     }
-    #[inline(always)]
+    #[cfg(test)]
     fn to_array(self) -> [f32; 8] {
         self.0
+    }
+    #[inline(always)]
+    fn sum_f64(self) -> f64 {
+        let l = self.0.map(f64::from);
+        let s = [l[0] + l[4], l[1] + l[5], l[2] + l[6], l[3] + l[7]];
+        (s[0] + s[2]) + (s[1] + s[3])
+    }
+    #[inline(always)]
+    fn min_bits(self) -> u32 {
+        self.0.iter().fold(u32::MAX, |m, x| m.min(x.to_bits()))
     }
 }
 
@@ -207,12 +223,34 @@ mod avx {
                 Avx(_mm256_castsi256_ps(_mm256_min_epu32(_mm256_castps_si256(self.0), d)))
             }
         }
-        #[inline(always)]
+        #[cfg(test)]
         fn to_array(self) -> [f32; 8] {
             let mut a = [0.0f32; 8];
             // SAFETY: a holds 8 writable f32; AVX (impl contract).
             unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
             a
+        }
+        #[inline(always)]
+        fn sum_f64(self) -> f64 {
+            // SAFETY: see the impl.
+            unsafe {
+                let lo = _mm256_cvtps_pd(_mm256_castps256_ps128(self.0));
+                let hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(self.0));
+                let s = _mm256_add_pd(lo, hi); // l_i + l_(i+4)
+                let t = _mm_add_pd(_mm256_castpd256_pd128(s), _mm256_extractf128_pd::<1>(s)); // s_j + s_(j+2)
+                _mm_cvtsd_f64(_mm_add_sd(t, _mm_unpackhi_pd(t, t)))
+            }
+        }
+        #[inline(always)]
+        fn min_bits(self) -> u32 {
+            // SAFETY: see the impl.
+            unsafe {
+                let v = _mm256_castps_si256(self.0);
+                let m = _mm_min_epu32(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+                let m = _mm_min_epu32(m, _mm_shuffle_epi32::<0b01_00_11_10>(m));
+                let m = _mm_min_epu32(m, _mm_shuffle_epi32::<0b10_11_00_01>(m));
+                _mm_cvtsi128_si32(m) as u32
+            }
         }
     }
 }
@@ -271,6 +309,7 @@ mod tests {
                 assert_eq!(canon(*p), canon(*v), "op {op} on {a:?} {b:?} {c:?}: {:?} vs {:?}", bits(*p), bits(*v));
             }
             assert_eq!(sum_f64(pa).to_bits(), sum_f64(va).to_bits());
+            assert_eq!(pa.min_bits(), va.min_bits());
         }
     }
 }

@@ -67,7 +67,12 @@ const VD: usize = 6;
 const P: usize = 7;
 const RHO: usize = 8;
 const FL: usize = 9;
-const NCH: usize = 10;
+/// x/h hi and lo parts, (z − row centre)/h, p/ρ².
+const XH: usize = 10;
+const XL: usize = 11;
+const ZR: usize = 12;
+const PR: usize = 13;
+const NCH: usize = 14;
 
 /// Caller-owned scratch of the fast evaluator (no allocation once warmed up, except one small
 /// vector of block slices per pass).
@@ -75,19 +80,17 @@ const NCH: usize = 10;
 pub struct FastWorkspace {
     grid: Grid,
     blocks: Vec<(usize, usize)>,
-    /// x/h (f64) and its f32 hi and lo parts, z relative to the cell row centre / h.
+    /// x/h (f64).
     xoh: Vec<Real>,
-    xh: Vec<f32>,
-    xl: Vec<f32>,
-    zr: Vec<f32>,
     kind: Vec<ParticleKind>,
     wall: Vec<bool>,
     rho: Vec<Real>,
     mass: Vec<Real>,
-    /// ux, uz, m p/ρ², m, m/ρ, ρ − ρ₀, m/ρ of non-walls (0 for walls), p, ρ, non-wall flag.
+    /// f32 channels (padded with [`PAD`] zeros): ux, uz, m p/ρ², m, m/ρ, ρ − ρ₀, m/ρ of non-walls
+    /// (0 for walls), p, ρ, non-wall flag, x/h hi, x/h lo, (z − row centre)/h, p/ρ².
     ch: [Vec<f32>; NCH],
-    /// p/ρ².
-    pr: Vec<f32>,
+    /// Constant C of eq 12 and the (kernel, h, choice) it was computed for.
+    c_visc: Option<(KernelKind, Real, crate::params::ViscousConstant, Real)>,
     wall_out: Vec<[Real; 4]>,
     rates: Vec<Rate>,
     frames: Frames,
@@ -95,6 +98,7 @@ pub struct FastWorkspace {
     cells: CellList,
     /// Cells per support radius; 0 = [`REACH`].
     reach: usize,
+    phases: [Real; 5],
 }
 
 thread_local! {
@@ -128,19 +132,28 @@ pub fn compute_rates_with(
 ) {
     let support = kernel.support_radius();
     let (px, pz) = (params.periodic_x, params.periodic_z);
+    let t0 = std::time::Instant::now();
     let reach = fws.reach();
     if particles.is_empty() || !fws.grid.build(&particles.x, &particles.z, support, reach, px, pz) {
+        fws.phases = [0.0; 5];
         fws.cells.build(&particles.x, &particles.z, support, px, pz);
         wcsph::compute_rates(params, kernel, particles, &fws.cells, g, ws);
         return;
     }
     let avx = backend == Backend::Auto && avx_available();
+    let t1 = std::time::Instant::now();
     fws.sort(params, kernel, particles);
+    let t2 = std::time::Instant::now();
     if fws.any_wall {
         fws.wall_pass(params, kernel, particles, g, avx);
     }
+    let t3 = std::time::Instant::now();
     fws.rate_pass(params, kernel, g, avx);
+    let t4 = std::time::Instant::now();
     fws.scatter(params, particles, ws);
+    let t5 = std::time::Instant::now();
+    let s = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64();
+    fws.phases = [s(t0, t1), s(t1, t2), s(t2, t3), s(t3, t4), s(t4, t5)];
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -151,6 +164,20 @@ fn avx_available() -> bool {
 #[cfg(not(target_arch = "x86_64"))]
 fn avx_available() -> bool {
     false
+}
+
+/// Runs `f(c0, c1, item)` for every block of cells with its item.
+fn run_blocks<T: Send>(parallel: bool, blocks: &[(usize, usize)], items: Vec<T>, f: impl Fn(usize, usize, T) + Sync) {
+    #[cfg(feature = "parallel")]
+    if parallel {
+        use rayon::prelude::*;
+        blocks.par_iter().zip(items).for_each(|(&(c0, c1), it)| f(c0, c1, it));
+        return;
+    }
+    let _ = parallel;
+    for (&(c0, c1), it) in blocks.iter().zip(items) {
+        f(c0, c1, it);
+    }
 }
 
 /// Runs `f(c0, c1, out)` on every block of cells with its slice of `out` (sorted order).
@@ -169,16 +196,7 @@ fn for_blocks<T: Send>(
         slices.push(a);
         rest = b;
     }
-    #[cfg(feature = "parallel")]
-    if parallel {
-        use rayon::prelude::*;
-        blocks.par_iter().zip(slices).for_each(|(&(c0, c1), s)| f(c0, c1, s));
-        return;
-    }
-    let _ = parallel;
-    for (&(c0, c1), s) in blocks.iter().zip(slices) {
-        f(c0, c1, s);
-    }
+    run_blocks(parallel, blocks, slices, f);
 }
 
 impl FastWorkspace {
@@ -189,6 +207,12 @@ impl FastWorkspace {
         FastWorkspace { reach: reach.clamp(1, 4), ..Default::default() }
     }
 
+    /// Wall-clock seconds of the phases of the last evaluation: grid build, sorted copies, wall
+    /// particles, rates, scatter back (zeros after a fallback to the reference).
+    pub fn phase_seconds(&self) -> [Real; 5] {
+        self.phases
+    }
+
     fn reach(&self) -> usize {
         if self.reach == 0 {
             REACH
@@ -197,57 +221,8 @@ impl FastWorkspace {
         }
     }
 
-    /// Sorted, padded copies of the particle data with the per-particle quantities of the pair
-    /// terms; blocks of cells.
-    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) {
-        let n = p.len();
-        let inv_h = 1.0 / kernel.h;
-        for v in [&mut self.xh, &mut self.xl, &mut self.zr, &mut self.pr].into_iter().chain(&mut self.ch) {
-            v.clear();
-            v.resize(n + PAD, 0.0);
-        }
-        self.xoh.resize(n, 0.0);
-        self.rho.resize(n, 0.0);
-        self.mass.resize(n, 0.0);
-        self.kind.resize(n, ParticleKind::Fluid);
-        self.wall.resize(n, false);
-        let grid = &self.grid;
-        let nx = grid.ax.n;
-        let [ux, uz, mp, m, v, dev, vd, pc, rc, fl] = &mut self.ch;
-        for c in 0..grid.cells() {
-            let (s, e) = grid.range(c);
-            let zc = grid.az_centre(c / nx);
-            for k in s..e {
-                let i = grid.order[k] as usize;
-                let (r, mk, kd) = (p.rho[i], p.mass[i], p.kind[i]);
-                let xo = p.x[i] * inv_h;
-                let hi = xo as f32;
-                self.xoh[k] = xo;
-                self.xh[k] = hi;
-                self.xl[k] = (xo - hi as Real) as f32;
-                self.zr[k] = ((p.z[i] - zc) * inv_h) as f32;
-                self.rho[k] = r;
-                self.mass[k] = mk;
-                self.kind[k] = kd;
-                let w = kd.is_wall();
-                self.wall[k] = w;
-                let pk = pressure(params, r);
-                let prk = pk / (r * r);
-                ux[k] = p.vx[i] as f32;
-                uz[k] = p.vz[i] as f32;
-                mp[k] = (mk * prk) as f32;
-                m[k] = mk as f32;
-                v[k] = (mk / r) as f32;
-                dev[k] = (r - params.rho0) as f32;
-                vd[k] = if w { 0.0 } else { v[k] };
-                pc[k] = pk as f32;
-                rc[k] = r as f32;
-                fl[k] = if w { 0.0 } else { 1.0 };
-                self.pr[k] = prk as f32;
-            }
-        }
-        self.any_wall = self.wall.iter().any(|&w| w);
-        self.frames = Frames::new(&self.grid, inv_h);
+    /// Blocks of consecutive cells of ≥ [`BLOCK_PARTICLES`] particles (the units of parallel work).
+    fn make_blocks(&mut self) {
         self.blocks.clear();
         let (mut c0, mut count) = (0, 0);
         for c in 0..self.grid.cells() {
@@ -263,12 +238,86 @@ impl FastWorkspace {
         }
     }
 
+    /// Sorted, padded copies of the particle data with the per-particle quantities of the pair
+    /// terms (block by block, on threads when `params.parallel`).
+    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) {
+        let n = p.len();
+        let inv_h = 1.0 / kernel.h;
+        self.make_blocks();
+        for v in &mut self.ch {
+            v.resize(n + PAD, 0.0);
+            v[n..].fill(0.0);
+        }
+        self.xoh.resize(n, 0.0);
+        self.rho.resize(n, 0.0);
+        self.mass.resize(n, 0.0);
+        self.kind.resize(n, ParticleKind::Fluid);
+        self.wall.resize(n, false);
+        let grid = &self.grid;
+        fn take<'a, T>(s: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+            let (a, b) = std::mem::take(s).split_at_mut(len);
+            *s = b;
+            a
+        }
+        let mut f64s = [&mut self.xoh[..], &mut self.rho[..], &mut self.mass[..]];
+        let (mut kind, mut wall) = (&mut self.kind[..], &mut self.wall[..]);
+        let mut ch: [&mut [f32]; NCH] = self.ch.each_mut().map(|v| &mut v[..n]);
+        let mut outs = Vec::with_capacity(self.blocks.len());
+        for &(c0, c1) in &self.blocks {
+            let len = grid.range(c1 - 1).1 - grid.range(c0).0;
+            let f = f64s.each_mut().map(|v| take(v, len));
+            let c = ch.each_mut().map(|v| take(v, len));
+            outs.push((f, take(&mut kind, len), take(&mut wall, len), c));
+        }
+        run_blocks(params.parallel, &self.blocks, outs, |c0, c1, (f, kind, wall, ch)| {
+            let [xoh, rho, mass] = f;
+            let [ux, uz, mp, m, v, dev, vd, pc, rc, fl, xh, xl, zr, pr] = ch;
+            let base = grid.range(c0).0;
+            for c in c0..c1 {
+                let (s, e) = grid.range(c);
+                let zc = grid.az_centre(c / grid.ax.n);
+                for k in s..e {
+                    let i = grid.order[k] as usize;
+                    let j = k - base;
+                    let (r, mk, kd) = (p.rho[i], p.mass[i], p.kind[i]);
+                    let xo = p.x[i] * inv_h;
+                    let hi = xo as f32;
+                    xoh[j] = xo;
+                    xh[j] = hi;
+                    xl[j] = (xo - hi as Real) as f32;
+                    zr[j] = ((p.z[i] - zc) * inv_h) as f32;
+                    rho[j] = r;
+                    mass[j] = mk;
+                    kind[j] = kd;
+                    let w = kd.is_wall();
+                    wall[j] = w;
+                    let pk = pressure(params, r);
+                    let inv_r = 1.0 / r;
+                    let prk = pk * inv_r * inv_r;
+                    ux[j] = p.vx[i] as f32;
+                    uz[j] = p.vz[i] as f32;
+                    mp[j] = (mk * prk) as f32;
+                    m[j] = mk as f32;
+                    v[j] = (mk * inv_r) as f32;
+                    dev[j] = (r - params.rho0) as f32;
+                    vd[j] = if w { 0.0 } else { v[j] };
+                    pc[j] = pk as f32;
+                    rc[j] = r as f32;
+                    fl[j] = if w { 0.0 } else { 1.0 };
+                    pr[j] = prk as f32;
+                }
+            }
+        });
+        self.any_wall = self.wall.iter().any(|&w| w);
+        self.frames = Frames::new(&self.grid, inv_h);
+    }
+
     /// Wall particles' velocity, pressure and density, then their rate-pass channels.
     fn wall_pass(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles, g: [Real; 2], avx: bool) {
         let n = self.xoh.len();
         self.wall_out.resize(n, [0.0; 4]);
         let inp = WallIn {
-            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.xh, xl: &self.xl, zr: &self.zr },
+            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.ch[XH], xl: &self.ch[XL], zr: &self.ch[ZR] },
             frames: &self.frames,
             kind: &self.kind,
             ch: [&self.ch[UX], &self.ch[UZ], &self.ch[P], &self.ch[RHO], &self.ch[FL]],
@@ -287,7 +336,7 @@ impl FastWorkspace {
             KernelKind::WendlandC2 => wall_run::<Wendland>(&inp, par, avx, b, out),
             KernelKind::CubicSpline => wall_run::<Cubic>(&inp, par, avx, b, out),
         }
-        let [ux, uz, mp, _, v, dev, ..] = &mut self.ch;
+        let [ux, uz, mp, _, v, dev, _, _, _, _, _, _, _, pr] = &mut self.ch;
         for k in 0..n {
             if self.wall[k] {
                 let [u, w, pw, rw] = self.wall_out[k];
@@ -297,7 +346,7 @@ impl FastWorkspace {
                 mp[k] = (self.mass[k] * prk) as f32;
                 v[k] = (self.mass[k] / rw) as f32;
                 dev[k] = (rw - params.rho0) as f32;
-                self.pr[k] = prk as f32;
+                pr[k] = prk as f32;
                 self.rho[k] = rw;
             }
         }
@@ -318,11 +367,20 @@ impl FastWorkspace {
             KernelKind::WendlandC2 => |q| KernelKind::WendlandC2.shape(q).0 / Wendland::FS,
             KernelKind::CubicSpline => |q| KernelKind::CubicSpline.shape(q).0 / Cubic::FS,
         };
+        let key = (kind, h, params.viscous_constant);
+        let c_visc = match self.c_visc {
+            Some((k, hh, vc, c)) if (k, hh, vc) == key => c,
+            _ => {
+                let c = mean_value_constant(kernel, params.viscous_constant);
+                self.c_visc = Some((kind, h, params.viscous_constant, c));
+                c
+            }
+        };
         let k = RateConsts {
             h,
             inv_h: 1.0 / h,
             grad: kind.sigma_2d() / (h * h * h) * ds,
-            c_mu: mean_value_constant(kernel, params.viscous_constant) * params.mu,
+            c_mu: c_visc * params.mu,
             mu: params.mu,
             delta_hc2: 2.0 * params.density_diffusion * h * params.c,
             shifting: params.shifting > 0.0,
@@ -332,11 +390,11 @@ impl FastWorkspace {
         };
         let c = &self.ch;
         let inp = RatesIn {
-            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.xh, xl: &self.xl, zr: &self.zr },
+            pos: Pos { grid: &self.grid, xoh: &self.xoh, xh: &self.ch[XH], xl: &self.ch[XL], zr: &self.ch[ZR] },
             frames: &self.frames,
             wall: &self.wall,
             ch: [&c[UX], &c[UZ], &c[MP], &c[M], &c[V], &c[DEV], &c[VD]],
-            pr: &self.pr,
+            pr: &c[PR],
             rho: &self.rho,
             mass: &self.mass,
             k,
@@ -378,8 +436,15 @@ impl FastWorkspace {
                 }
             }
         }
+        let rates = &self.rates;
+        #[cfg(feature = "parallel")]
+        if params.parallel {
+            use rayon::prelude::*;
+            rank.par_iter().map(|&k| rates[k as usize]).collect_into_vec(&mut ws.rates);
+            return;
+        }
         ws.rates.clear();
-        ws.rates.extend(rank.iter().map(|&k| self.rates[k as usize]));
+        ws.rates.extend(rank.iter().map(|&k| rates[k as usize]));
     }
 }
 
