@@ -8,7 +8,8 @@
 //!   itself; z is stored relative to the centre of the particle's cell row (|z̃| ≤ cell/2h), a run
 //!   being one row; the periodic shift of a run is applied to the running particle, in f64;
 //! * the kernels are written with `max(0, ·)`, so candidates outside the support give exact zeros;
-//! * the lanes past a run's end are masked (their f, f' and r² zeroed);
+//! * the lanes past a run's end get dx = 10⁶ h (one blend): their kernel terms are exact zeros and
+//!   their r² is never the smallest;
 //! * r² carries a tiny offset (1e-30 h²): the particle's own lane has r = 1e-15 h, f' = 0, hence
 //!   zero gradient terms, and W(0) in the Shepard denominator of eq 12 — the self term of
 //!   [`crate::wcsph::compute_rates`]; r² ≤ the offset is left out of the nearest distance.
@@ -19,6 +20,8 @@ use crate::particles::ParticleKind;
 use crate::wcsph::Rate;
 use crate::Real;
 
+/// dx of the lanes past a run's end \[h\].
+const FAR: f32 = 1.0e6;
 /// Offset added to r² \[h²\] (see the module doc).
 const TINY2: f32 = 1.0e-30;
 /// `bits(r²) − R2_BIAS` maps r² ≤ TINY2 (own lane, masked lanes) above every other r² as u32.
@@ -70,8 +73,9 @@ impl Shape for Quartic {
         let b = L::splat(1.5).sub(q).max(z);
         let c = L::splat(0.5).sub(q).max(z);
         let (a2, b2, c2) = (a.mul(a), b.mul(b), c.mul(c));
-        let f = a2.mul_add(a2, c2.mul(c2).mul_add(ten, b2.mul(b2).mul(m5)));
-        let d = c2.mul(c).mul_add(ten, b2.mul(b).mul_add(m5, a2.mul(a)));
+        let (b5, c10) = (b2.mul(m5), c2.mul(ten)); // −5 b², 10 c²
+        let f = a2.mul_add(a2, b5.mul_add(b2, c10.mul(c2)));
+        let d = c10.mul_add(c, b5.mul_add(b, a2.mul(a)));
         (f, d)
     }
     #[inline(always)]
@@ -81,7 +85,8 @@ impl Shape for Quartic {
         let b = L::splat(1.5).sub(q).max(z);
         let c = L::splat(0.5).sub(q).max(z);
         let (a2, b2, c2) = (a.mul(a), b.mul(b), c.mul(c));
-        a2.mul_add(a2, c2.mul(c2).mul_add(ten, b2.mul(b2).mul(m5)))
+        let (b5, c10) = (b2.mul(m5), c2.mul(ten));
+        a2.mul_add(a2, b5.mul_add(b2, c10.mul(c2)))
     }
 }
 
@@ -172,9 +177,10 @@ impl Frames {
 impl Scratch {
     /// Chunks of cell `c` into `self.chunks[..self.n]`; returns true when some use a shifted x
     /// frame. Runs of ≤ 16 particles (nearly all) take no data-dependent branch: two chunk slots
-    /// are written and ⌈len/8⌉ of them kept.
+    /// are written and ⌈len/8⌉ of them kept. With `FLUID_ONLY`, runs of wall particles only are left
+    /// out (`fluid`: number of non-wall particles before each sorted index).
     #[inline]
-    fn cell(&mut self, grid: &Grid, fr: &Frames, c: usize) -> bool {
+    fn cell<const FLUID_ONLY: bool>(&mut self, grid: &Grid, fr: &Frames, c: usize, fluid: &[u32]) -> bool {
         let nx = grid.ax.n;
         let reach = grid.reach();
         let (cx, cz) = (c % nx, c / nx);
@@ -205,6 +211,9 @@ impl Scratch {
                         2
                     };
                     let (s, e) = (starts[base + x0] as usize, starts[base + x1 + 1] as usize);
+                    if FLUID_ONLY && fluid[s] == fluid[e] {
+                        continue;
+                    }
                     let len = e - s;
                     if self.chunks.len() < n + len.div_ceil(8) + 2 {
                         self.chunks.resize(n + len.div_ceil(8) + 16, Chunk::default());
@@ -351,6 +360,7 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
     // pass 1: geometry and kernel
     let fr = frames(pos.xoh[a], &inp.frames.shifts, shifted);
     let zra = L::splat(pos.zr[a]);
+    let far = L::splat(FAR);
     let mut r2min = L::splat(f32::from_bits(u32::MAX));
     for (j, ck) in chunks.iter().enumerate() {
         let i = ck.i as usize;
@@ -360,13 +370,13 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
         let mk = unsafe { mask::<L>(ck.k as usize) };
         let fj = 2 * ck.frame as usize;
         let dx = L::splat(fr[fj]).sub(ld(pxh)).add(L::splat(fr[fj + 1]).sub(ld(pxl)));
+        let dx = far.blend(dx, mk);
         let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
         let r2 = dz.mul_add(dz, dx.mul_add(dx, tiny));
-        r2min = r2min.min_bits_sub(r2.and(mk), R2_BIAS);
+        r2min = r2min.min_bits_sub(r2, R2_BIAS);
         let rr = r2.sqrt();
         let inv = one.div(rr);
         let (f, d) = S::f_d(rr);
-        let (f, d) = (f.and(mk), d.and(mk));
         // SAFETY: the scratch lanes hold 8 per chunk (asserted).
         unsafe {
             L::store(ldx.add(8 * j), dx);
@@ -465,7 +475,7 @@ pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: b
             out[s - base..e - base].fill(Rate::default());
             continue;
         }
-        let shifted = sc.cell(grid, inp.frames, c);
+        let shifted = sc.cell::<false>(grid, inp.frames, c, &[]);
         for a in s..e {
             if inp.wall[a] {
                 out[a - base] = Rate::default();
@@ -521,6 +531,8 @@ pub(super) struct WallIn<'a> {
     pub(super) ch: [&'a [f32]; 5],
     /// Sorted position → particle index.
     pub(super) order: &'a [u32],
+    /// Number of non-wall particles before each sorted index (n + 1 values).
+    pub(super) fluid: &'a [u32],
     /// Prescribed wall velocity (f64, particle order).
     pub(super) vx: &'a [Real],
     pub(super) vz: &'a [Real],
@@ -555,27 +567,47 @@ pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
         if !inp.kind[s..e].iter().any(|k| k.is_wall()) {
             continue;
         }
-        let shifted = sc.cell(grid, inp.frames, c);
+        let shifted = sc.cell::<true>(grid, inp.frames, c, inp.fluid);
+        let chunks = &sc.chunks[..sc.n];
+        assert!(sc.lane.iter().all(|l| l.len() >= 8 * chunks.len()));
+        let [ldx, ldz, lf, ..] = &mut sc.lane;
+        let (ldx, ldz, lf) = (ldx.as_mut_ptr(), ldz.as_mut_ptr(), lf.as_mut_ptr());
         for w in s..e {
             if !inp.kind[w].is_wall() {
                 continue;
             }
-            let zero = L::splat(0.0);
-            let tiny = L::splat(TINY2);
-            let (mut sw, mut sux, mut suz, mut sp, mut srx, mut srz) = (zero, zero, zero, zero, zero, zero);
+            let (zero, tiny, far) = (L::splat(0.0), L::splat(TINY2), L::splat(FAR));
+            // pass 1: geometry and kernel (as in the rate pass)
             let fr = frames(inp.pos.xoh[w], &inp.frames.shifts, shifted);
             let zra = L::splat(inp.pos.zr[w]);
-            for ck in &sc.chunks[..sc.n] {
+            for (j, ck) in chunks.iter().enumerate() {
                 let i = ck.i as usize;
                 // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
                 let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
                 // SAFETY: L::available() (caller); k ≤ 8.
                 let mk = unsafe { mask::<L>(ck.k as usize) };
-                let j = 2 * ck.frame as usize;
-                let dx = L::splat(fr[j]).sub(ld(pxh)).add(L::splat(fr[j + 1]).sub(ld(pxl)));
+                let fj = 2 * ck.frame as usize;
+                let dx = L::splat(fr[fj]).sub(ld(pxh)).add(L::splat(fr[fj + 1]).sub(ld(pxl)));
+                let dx = far.blend(dx, mk);
                 let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
                 let rr = dz.mul_add(dz, dx.mul_add(dx, tiny)).sqrt();
-                let wf = S::f(rr).mul(ld(pfl)).and(mk);
+                // SAFETY: the scratch lanes hold 8 per chunk (asserted).
+                unsafe {
+                    L::store(ldx.add(8 * j), dx);
+                    L::store(ldz.add(8 * j), dz);
+                    L::store(lf.add(8 * j), S::f(rr));
+                }
+            }
+            // pass 2: Shepard sums over the non-wall lanes
+            let (mut sw, mut sux, mut suz, mut sp, mut srx, mut srz) = (zero, zero, zero, zero, zero, zero);
+            for (j, ck) in chunks.iter().enumerate() {
+                let i = ck.i as usize;
+                // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
+                let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
+                // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
+                let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
+                let (dx, dz) = (lds(ldx), lds(ldz));
+                let wf = lds(lf).mul(ld(pfl));
                 sw = sw.add(wf);
                 sux = ld(pux).mul_add(wf, sux);
                 suz = ld(puz).mul_add(wf, suz);
@@ -643,7 +675,7 @@ mod tests {
                 }
                 let mut sc = Scratch::default();
                 for c in 0..g.cells() {
-                    let shifted = sc.cell(&g, &fr, c);
+                    let shifted = sc.cell::<false>(&g, &fr, c, &[]);
                     let (s, e) = g.range(c);
                     for ka in s..e {
                         let a = order[ka];

@@ -1,6 +1,6 @@
 //! Eight f32 lanes: a portable array type and an AVX2 + FMA register type with exactly the same IEEE
 //! operations (`+ − × ÷ √` correctly rounded, fused multiply-add with one rounding, `max` as `a > b ? a : b`,
-//! bitwise and, unsigned integer min), so a kernel written once over [`Lanes`] gives the same bits
+//! sign-bit blend, unsigned integer min), so a kernel written once over [`Lanes`] gives the same bits
 //! with either type.
 
 /// Eight f32 lanes.
@@ -37,8 +37,8 @@ pub(super) unsafe trait Lanes: Copy {
     fn max(self, o: Self) -> Self;
     /// √self.
     fn sqrt(self) -> Self;
-    /// Bitwise `self & o`.
-    fn and(self, o: Self) -> Self;
+    /// Per lane: `b` where the sign bit of `mask` is set, else `self`.
+    fn blend(self, b: Self, mask: Self) -> Self;
     /// Lanes as u32 bit patterns: `min(self, bits(x) − k)` (unsigned, wrapping subtraction).
     fn min_bits_sub(self, x: Self, k: u32) -> Self;
     /// The lanes in order (tests).
@@ -115,8 +115,8 @@ unsafe impl Lanes for Portable {
         Portable(self.0.map(f32::sqrt))
     }
     #[inline(always)]
-    fn and(self, o: Self) -> Self {
-        Portable(zip(self.0, o.0, |a, b| f32::from_bits(a.to_bits() & b.to_bits())))
+    fn blend(self, b: Self, mask: Self) -> Self {
+        Portable(std::array::from_fn(|i| if mask.0[i].is_sign_negative() { b.0[i] } else { self.0[i] }))
     }
     #[inline(always)]
     fn min_bits_sub(self, x: Self, k: u32) -> Self {
@@ -211,9 +211,9 @@ mod avx {
             Avx(unsafe { _mm256_sqrt_ps(self.0) })
         }
         #[inline(always)]
-        fn and(self, o: Self) -> Self {
+        fn blend(self, b: Self, mask: Self) -> Self {
             // SAFETY: see the impl.
-            Avx(unsafe { _mm256_and_ps(self.0, o.0) })
+            Avx(unsafe { _mm256_blendv_ps(self.0, b.0, mask.0) })
         }
         #[inline(always)]
         fn min_bits_sub(self, x: Self, k: u32) -> Self {
@@ -299,7 +299,7 @@ mod tests {
                 (pa.mul_add(pb, pc).to_array(), va.mul_add(vb, vc).to_array()),
                 (pa.max(pb).to_array(), va.max(vb).to_array()),
                 (pa.sqrt().to_array(), va.sqrt().to_array()),
-                (pa.and(pb).to_array(), va.and(vb).to_array()),
+                (pa.blend(pb, pc).to_array(), va.blend(vb, vc).to_array()),
                 (pa.min_bits_sub(pb, 0x1234_5678).to_array(), va.min_bits_sub(vb, 0x1234_5678).to_array()),
                 (Portable::splat(a[0]).to_array(), Avx::splat(a[0]).to_array()),
             ];

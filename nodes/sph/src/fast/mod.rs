@@ -92,6 +92,8 @@ pub struct FastWorkspace {
     /// Constant C of eq 12 and the (kernel, h, choice) it was computed for.
     c_visc: Option<(KernelKind, Real, crate::params::ViscousConstant, Real)>,
     wall_out: Vec<[Real; 4]>,
+    /// Number of non-wall particles before each sorted index.
+    fluid: Vec<u32>,
     rates: Vec<Rate>,
     frames: Frames,
     any_wall: bool,
@@ -309,6 +311,14 @@ impl FastWorkspace {
             }
         });
         self.any_wall = self.wall.iter().any(|&w| w);
+        if self.any_wall {
+            self.fluid.resize(n + 1, 0);
+            let mut count = 0;
+            for (f, &w) in self.fluid[1..].iter_mut().zip(&self.wall) {
+                count += u32::from(!w);
+                *f = count;
+            }
+        }
         self.frames = Frames::new(&self.grid, inv_h);
     }
 
@@ -321,6 +331,7 @@ impl FastWorkspace {
             frames: &self.frames,
             kind: &self.kind,
             ch: [&self.ch[UX], &self.ch[UZ], &self.ch[P], &self.ch[RHO], &self.ch[FL]],
+            fluid: &self.fluid,
             order: &self.grid.order,
             vx: &p.vx,
             vz: &p.vz,
