@@ -1,12 +1,14 @@
 //! Pair kernels of the fast evaluator, written once over [`Lanes`] and instantiated for the portable
 //! lanes and (x86-64) the AVX2 + FMA lanes.
 //!
-//! Every particle runs over the runs of the cell-sorted arrays that hold its neighbour cells
-//! ([`Grid::runs`]), 8 candidates at a time and without branches:
+//! Every particle runs over the chunks ([`Chunk`]: ≤ 8 consecutive sorted particles of one row run)
+//! of its cell's neighbour cells, 8 candidates at a time and without branches:
 //! * positions: x/h is stored as an f32 pair hi + lo (exact to ~1e-14 h at any domain size) and the
 //!   pair difference taken as (hi_a − hi_b) + (lo_a − lo_b), so dx is correct to one rounding of
-//!   itself; z is stored relative to the centre of the particle's cell row (|z̃| ≤ cell/2h), a run
-//!   being one row; the periodic shift of a run is applied to the running particle, in f64;
+//!   itself; a periodic x image uses the running particle's x/h shifted by the period in f64 and
+//!   split again (its "frame"); z is stored relative to the centre of the particle's cell row
+//!   (|z̃| ≤ cell/2h), a run being one row, and the running particle's z̃ is moved into the run's
+//!   row frame by −d·cell/h (d the row offset, periodic images included);
 //! * the kernels are written with `max(0, ·)`, so candidates outside the support give exact zeros;
 //! * the lanes past a run's end get dx = 10⁶ h (one blend): their kernel terms are exact zeros and
 //!   their r² is never the smallest;
@@ -24,7 +26,7 @@ use crate::Real;
 const FAR: f32 = 1.0e6;
 /// Offset added to r² \[h²\] (see the module doc).
 const TINY2: f32 = 1.0e-30;
-/// `bits(r²) − R2_BIAS` maps r² ≤ TINY2 (own lane, masked lanes) above every other r² as u32.
+/// `bits(r²) − R2_BIAS` maps r² ≤ TINY2 (the own lane) above every other r² as u32.
 const R2_BIAS: u32 = TINY2.to_bits() + 1;
 /// Lane masks: 8 loads from `MASK[8 − k..]` give k ones then zeros.
 static MASK: [u32; 16] = [!0, !0, !0, !0, !0, !0, !0, !0, 0, 0, 0, 0, 0, 0, 0, 0];

@@ -1,28 +1,32 @@
 //! Fast evaluation of the WCSPH right-hand sides: the same equations as
 //! [`crate::wcsph::compute_rates`] (Shahriari & Garcia 2018, eq 7, 8, 10, 12 or Morris et al. 1997,
 //! the wall particles of §2.2, δ-SPH diffusion and the shifting sums), the reference being kept as
-//! the twin this module is tested against (`tests/fast_rhs.rs`).
+//! the twin this module is tested against (`tests/fast_rhs.rs`). Selected by
+//! [`SphParams::fast_rhs`] (default) in [`crate::Solver`].
 //!
-//! Design (see `PERF.md`):
-//! * particles are sorted by cell once per evaluation into scratch arrays (the solver's order is
-//!   untouched; results are scattered back), with the per-particle quantities of the pair terms
-//!   precomputed in f32: velocities, m p/ρ², m, m/ρ, ρ − ρ₀;
-//! * per cell, the neighbour cells (3 contiguous runs of the sorted order, more where a periodic
-//!   axis wraps) are copied into one buffer with positions relative to the cell centre, in units
-//!   of h, as f32 (exact minimum image: the periodic shift is applied per run, in f64);
-//! * each particle of the cell runs over the buffer 8 candidates at a time with no branch
-//!   ([`kernels`]), in f32 with fused multiply-adds; the 8 lanes of every sum are added in f64 and
-//!   the constants (σ/h³, C μ/ρ_a, …) applied in f64;
+//! Design (measurements in `PERF.md`):
+//! * a grid of cells of side ≥ support / 2 (`grid.rs`); once per evaluation the particles are
+//!   copied in cell order (row-major, stable: deterministic) into scratch arrays, the solver's order
+//!   untouched, with the per-particle quantities of the pair terms precomputed in f32: x/h as an
+//!   f32 pair hi + lo, (z − cell row centre)/h, velocities, m p/ρ², m, m/ρ, ρ − ρ₀;
+//! * the neighbour cells of a cell are 5 rows of 5 cells, each row a contiguous run of the sorted
+//!   arrays (2 where a periodic axis wraps), cut into chunks of ≤ 8 candidates once per cell;
+//! * every particle of the cell runs over its cell's chunks 8 lanes at a time, without branches, in
+//!   two passes — geometry and kernel, then the sums (`kernels.rs`) — in f32 with fused
+//!   multiply-adds; the 8 lanes of every sum are added in f64 and the constants (σ/h³, C μ/ρ_a, …)
+//!   applied in f64;
 //! * the lanes are AVX2 + FMA registers where the CPU has them (runtime detection), else a portable
 //!   array type with the same IEEE operations: both give the same bits (tested);
-//! * cells are processed in blocks on rayon threads (`params.parallel`); every particle's result
-//!   depends only on the data, never on the blocks or threads: bit-identical for any thread count.
+//! * wall particles first get their Shepard values in a pass of the same form (over chunk lists
+//!   without wall-only runs), then the rates;
+//! * cells are processed in blocks on rayon threads (`params.parallel`), every particle written by
+//!   exactly one block; a particle's result depends only on the data, never on the blocks or the
+//!   threads: bit-identical for any thread count. Results are scattered back to the solver's order.
 //!
-//! Precision: positions relative to the cell centre are ≤ 1.5 cells ≈ 4 h, so their f32 rounding
-//! is ≤ 2.4e-7 h; every pair term is then correct to a few 1e-7 of itself, and a rate to about
-//! 1e-6 of Σ|terms| (f32 lane sums of ≤ ~12 terms, f64 across lanes). Rates that are a small
-//! difference of large terms (a large background pressure) lose that relative accuracy; see
-//! `PERF.md`.
+//! Precision: dx is exact to one f32 rounding of itself (hi/lo pair), dz to ~2e-7 h; every pair
+//! term is then correct to a few 1e-7 of itself, and a rate to ~1e-6 of the sum of the magnitudes
+//! of its terms (f32 lane sums of ≤ ~10 terms, f64 across lanes). Measured against the reference:
+//! ≤ 1.8e-6 of the largest rate (`tests/fast_rhs.rs`, `PERF.md`).
 
 mod grid;
 mod kernels;
@@ -110,7 +114,8 @@ thread_local! {
 /// [`crate::wcsph::compute_rates`] computed by the fast evaluator: same outputs (`ws.ux`, `uz`, `p`,
 /// `rho`, `rates`) to f32 accuracy (see the module doc), with its own cell grid at the kernel support
 /// (no [`CellList`] needed). Falls back to the reference where the fast grid does not apply (a
-/// periodic axis shorter than 2 `REACH` + 1 cells, impossible with validated parameters).
+/// periodic axis shorter than 2 reach + 1 cells, impossible with validated parameters) and when two
+/// particles share a position (the reference's 0/0 then gives NaN rates, which the solver reports).
 pub fn compute_rates(
     params: &SphParams,
     kernel: &Kernel,
@@ -144,7 +149,13 @@ pub fn compute_rates_with(
     }
     let avx = backend == Backend::Auto && avx_available();
     let t1 = std::time::Instant::now();
-    fws.sort(params, kernel, particles);
+    if fws.sort(params, kernel, particles) {
+        // coincident particles: the reference's 0/0 (NaN rates, reported by the solver)
+        fws.cells.build(&particles.x, &particles.z, support, px, pz);
+        wcsph::compute_rates(params, kernel, particles, &fws.cells, g, ws);
+        fws.phases = [0.0; 5];
+        return;
+    }
     let t2 = std::time::Instant::now();
     if fws.any_wall {
         fws.wall_pass(params, kernel, particles, g, avx);
@@ -241,8 +252,9 @@ impl FastWorkspace {
     }
 
     /// Sorted, padded copies of the particle data with the per-particle quantities of the pair
-    /// terms (block by block, on threads when `params.parallel`).
-    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) {
+    /// terms (block by block, on threads when `params.parallel`). Returns true when two particles
+    /// share a position (they share a cell; the fast kernels would treat the pair as a self pair).
+    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) -> bool {
         let n = p.len();
         let inv_h = 1.0 / kernel.h;
         self.make_blocks();
@@ -271,6 +283,7 @@ impl FastWorkspace {
             let c = ch.each_mut().map(|v| take(v, len));
             outs.push((f, take(&mut kind, len), take(&mut wall, len), c));
         }
+        let coincident = std::sync::atomic::AtomicBool::new(false);
         run_blocks(params.parallel, &self.blocks, outs, |c0, c1, (f, kind, wall, ch)| {
             let [xoh, rho, mass] = f;
             let [ux, uz, mp, m, v, dev, vd, pc, rc, fl, xh, xl, zr, pr] = ch;
@@ -308,6 +321,14 @@ impl FastWorkspace {
                     fl[j] = if w { 0.0 } else { 1.0 };
                     pr[j] = prk as f32;
                 }
+                // same position ⇒ same x/h and z̃ (the converse within ~1e-7 h only costs a
+                // reference evaluation)
+                let (xs, zs) = (&xoh[s - base..e - base], &zr[s - base..e - base]);
+                for q in 0..xs.len() {
+                    if (q + 1..xs.len()).any(|b| xs[b] == xs[q] && zs[b] == zs[q]) {
+                        coincident.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
+                }
             }
         });
         self.any_wall = self.wall.iter().any(|&w| w);
@@ -320,6 +341,7 @@ impl FastWorkspace {
             }
         }
         self.frames = Frames::new(&self.grid, inv_h);
+        coincident.into_inner()
     }
 
     /// Wall particles' velocity, pressure and density, then their rate-pass channels.
