@@ -98,9 +98,10 @@ pub struct SphParams {
     /// Run the per-particle loops on rayon threads (bit-identical results either way). Default true.
     pub parallel: bool,
     /// Evaluate the right-hand sides with the fast evaluator ([`crate::fast`]: cell-sorted scratch
-    /// arrays, f32 pair terms relative to the cell, 8 lanes, AVX2 + FMA where available; the same
-    /// equations as [`crate::wcsph::compute_rates`] to ~1e-6 of the largest rate, bit-identical
-    /// for any thread count). `false` runs the f64 reference `compute_rates`. Default true.
+    /// arrays, f32 pair terms in 8 lanes, AVX2 + FMA where available, f64 lane sums; the same
+    /// equations as [`crate::wcsph::compute_rates`] to ~1e-6 of the largest rate, bit-identical for
+    /// any thread count; ~8× faster, see `PERF.md`). `false` runs the f64 reference
+    /// `compute_rates`. Default true.
     pub fast_rhs: bool,
 }
 
