@@ -110,6 +110,12 @@ pub struct SphParams {
     pub dt_collapse_ratio: Real,
     /// Run the per-particle loops on rayon threads (bit-identical results either way). Default true.
     pub parallel: bool,
+    /// Evaluate the right-hand sides with the fast evaluator ([`crate::fast`]: cell-sorted scratch
+    /// arrays, f32 pair terms in 8 lanes, AVX2 + FMA where available, f64 lane sums; the same
+    /// equations as [`crate::wcsph::compute_rates`] to ~1e-6 of the largest rate, bit-identical for
+    /// any thread count; ~8× faster, see `PERF.md`). `false` runs the f64 reference
+    /// `compute_rates`. Default true.
+    pub fast_rhs: bool,
 }
 
 impl Default for SphParams {
@@ -137,6 +143,7 @@ impl Default for SphParams {
             density_error_limit: 0.1,
             dt_collapse_ratio: 1e-3,
             parallel: true,
+            fast_rhs: true,
         }
     }
 }

@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use crate::boundary::{self, BoundaryFlux, BoundaryState, OpenBoundary};
 use crate::checkpoint::{Checkpoint, CheckpointHeader};
+use crate::fast::{self, FastWorkspace};
 use crate::kernel::Kernel;
 use crate::neighbours::CellList;
 use crate::params::{ParamError, SphParams};
@@ -171,6 +172,7 @@ pub struct Solver {
     time: Real,
     cells: CellList,
     ws: Workspace,
+    fast: FastWorkspace,
     x0: Vec<Real>,
     z0: Vec<Real>,
     vx0: Vec<Real>,
@@ -235,6 +237,7 @@ impl Solver {
             time,
             cells: CellList::default(),
             ws: Workspace::default(),
+            fast: FastWorkspace::default(),
             x0: Vec::new(),
             z0: Vec::new(),
             vx0: Vec::new(),
@@ -298,6 +301,8 @@ impl Solver {
         let t = self.time;
         self.set_boundary_time(t);
         self.evaluate(t);
+        let r = self.kernel.support_radius();
+        self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
         let (p, ws, k) = (&self.particles, &self.ws, &self.kernel);
         let (px, pz) = (&p.x[..], &p.z[..]);
         xs.iter()
@@ -557,9 +562,14 @@ impl Solver {
     }
 
     fn evaluate(&mut self, t: Real) {
+        let g = self.body_force_at(t);
+        // the fast evaluator has no tensile correction: the reference computes that case
+        if self.params.fast_rhs && self.params.tensile_correction == 0.0 {
+            fast::compute_rates(&self.params, &self.kernel, &self.particles, g, &mut self.ws, &mut self.fast);
+            return;
+        }
         let r = self.kernel.support_radius();
         self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
-        let g = self.body_force_at(t);
         compute_rates(&self.params, &self.kernel, &self.particles, &self.cells, g, &mut self.ws);
     }
 

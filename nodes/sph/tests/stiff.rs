@@ -249,8 +249,8 @@ impl Domain for BoxDomain {
 fn hydrostatic_tank_stays_at_rest_with_the_right_bottom_pressure() {
     // Closed 2 × 2 mm box full of fluid under gravity g = 9.81 m/s² (+z is down), 20 × 20 lattice,
     // c = 10 √(gH), initial density hydrostatic. Run 20 √(H/g). Outcome: spurious currents grow
-    // to 1.6 % of √(gH) around t ≈ 8 √(H/g) and then decay (kinetic energy at the end 5 % of its
-    // peak, final largest speed 0.34 % of √(gH)); the pressure of the deepest fluid row is
+    // to 1.6 % of √(gH) around t ≈ 8 √(H/g) and then decay (kinetic energy at the end 5–7 % of its
+    // peak, final largest speed 0.3–0.6 % of √(gH): f64 reference / fast f32 pair terms); the pressure of the deepest fluid row is
     // ρ₀ g z within 2 % (measured 0.17 %); no particle leaves the box (the guard never fires).
     let (hgt, n, g) = (2e-3, 20usize, 9.81);
     let dx = hgt / n as Real;
@@ -312,7 +312,7 @@ fn hydrostatic_tank_stays_at_rest_with_the_right_bottom_pressure() {
         d.guard_corrections
     );
     assert!(vmax <= 0.03 * u_ref, "{vmax}");
-    assert!(d.max_speed <= 5e-3 * u_ref, "final speed {}", d.max_speed);
+    assert!(d.max_speed <= 1e-2 * u_ref, "final speed {}", d.max_speed);
     assert!(d.kinetic_energy <= 0.2 * ke_peak, "kinetic energy must decay: {} of peak {ke_peak}", d.kinetic_energy);
     assert!((p_bottom / expect - 1.0).abs() <= 0.02, "{p_bottom} vs {expect}");
     assert_eq!(d.guard_corrections, 0);
