@@ -5,6 +5,9 @@
 //! and the split of the outflow, and the wall time. Optionally writes a checkpoint at the end.
 //!
 //! `cargo run --release -p sonoflow-sph --example carotid -- [dx_mm=0.3] [t_end=0.83] [every=0.05] [c=5.5] [shifting=0] [checkpoint_out]`
+//! (with `CHECKPOINT_IN`, `t_end` is the duration after the checkpoint's time)
+//! Environment: `DELTA` (δ-SPH), `TENSILE`, `PB` (background pressure), `H_OVER_DX` (1.2), `CFL` (0.25),
+//! `GEOM=tube` (a straight tube instead), `CHECKPOINT_IN` (resume).
 
 use sonoflow_sph::geometry::{carotid_bifurcation, BuildOptions, InitialVelocity};
 use sonoflow_sph::{ProfileKind, Real, Solver, SphParams, WaveformSpec};
@@ -20,8 +23,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let c = get(3, 5.5)?;
     let shifting = get(4, 0.0)?;
     let ckpt_out = a.get(5).cloned();
+    let h_over_dx: Real = std::env::var("H_OVER_DX").ok().and_then(|v| v.parse().ok()).unwrap_or(1.2);
     let params = SphParams {
-        h: 1.2 * dx,
+        h: h_over_dx * dx,
+        cfl: std::env::var("CFL").ok().and_then(|v| v.parse().ok()).unwrap_or(0.25),
         rho0: 1000.0,
         c,
         mu: 4e-3,
@@ -56,13 +61,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         params.h * 1e3
     );
     let domain = scene.guard_domain();
-    let mut s = Solver::new(params, scene.particles, 0.0)?.with_open_boundaries(scene.boundaries)?.with_domain(domain);
+    let mut s = match std::env::var("CHECKPOINT_IN") {
+        Ok(path) => {
+            let ck = sonoflow_sph::Checkpoint::read(std::path::Path::new(&path))?;
+            println!("resuming from {path} at t = {} s", ck.header.time);
+            Solver::from_checkpoint(params, ck, scene.boundaries, &[])?
+        }
+        Err(_) => Solver::new(params, scene.particles, 0.0)?.with_open_boundaries(scene.boundaries)?,
+    }
+    .with_domain(domain);
+    let t_begin = s.time();
     let start = std::time::Instant::now();
+    let steps0 = s.steps();
     let n = (t_end / every).round().max(1.0) as usize;
     let mut last: Vec<Real> = vec![0.0; names.len()];
     let mut total_out = vec![0.0; names.len()];
     for k in 1..=n {
-        let t = t_end * k as Real / n as Real;
+        let t = t_begin + t_end * k as Real / n as Real;
         s.advance_to(t)?;
         let d = s.diagnostics();
         let net: Vec<Real> = d.boundaries.iter().map(|(_, f)| f.net_in()).collect();
@@ -112,7 +127,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             d.guard_corrections,
             d.shift_ratio,
             wall,
-            d.steps as Real / wall
+            (d.steps - steps0) as Real / wall
         );
     }
     let out: Real = -total_out[1..].iter().sum::<Real>();
