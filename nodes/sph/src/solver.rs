@@ -748,7 +748,7 @@ impl Solver {
         let t_new = t_n + dt;
         // the guard every 4th step: a fluid particle moves ≤ 4 · cfl · h · |u|/(c + |u|) ≲ 0.1 h in
         // that time, far less than the wall layers' thickness
-        if (self.steps + 1) % 4 == 0 {
+        if (self.steps + 1).is_multiple_of(4) {
             self.guard(t_new);
         }
         // profiles at t_new for the particles the exchange creates or converts; the next step's
