@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release -p sonoflow-sph --example taylor_green -- [n] [Re] [background_pressure/(ρU²)] [c/U] [t_end]`
 
-use sonoflow_sph::{ParticleKind, Particles, Period, Real, Solver, SphParams};
+use sonoflow_sph::{Real, Solver};
 use std::f64::consts::PI;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -16,37 +16,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let pb = get(2, 0.0)?;
     let c = get(3, 10.0)?;
     let t_end = get(4, 1.0)?;
-    let (l, u0, rho0) = (1.0, 1.0, 1.0);
-    let dx = l / n as Real;
-    let k = 2.0 * PI / l;
-    let mut p = Particles::default();
-    for j in 0..n {
-        for i in 0..n {
-            let (x, z) = ((i as Real + 0.5) * dx, (j as Real + 0.5) * dx);
-            let pr = -rho0 * u0 * u0 / 4.0 * ((2.0 * k * x).cos() + (2.0 * k * z).cos());
-            let ux = -u0 * (k * x).cos() * (k * z).sin();
-            let uz = u0 * (k * x).sin() * (k * z).cos();
-            p.push(x, z, ux, uz, rho0 + pr / (c * c), rho0 * dx * dx, ParticleKind::Fluid, (j * n + i) as u64);
-        }
-    }
-    let params = SphParams {
-        h: 1.2 * dx,
-        rho0,
-        c,
-        mu: rho0 * u0 * l / re,
-        background_pressure: pb * rho0 * u0 * u0,
-        periodic_x: Some(Period { min: 0.0, length: l }),
-        periodic_z: Some(Period { min: 0.0, length: l }),
-        dt_max: 1.0,
-        viscous_term: if std::env::var("VISC").as_deref() == Ok("morris") {
-            sonoflow_sph::ViscousTerm::Morris
-        } else {
-            sonoflow_sph::ViscousTerm::MeanValue
-        },
-        shifting: std::env::var("SHIFT").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0),
-        density_diffusion: std::env::var("DELTA").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0),
-        ..Default::default()
+    let dx = 1.0 / n as Real;
+    let (p, mut params) = sonoflow_sph::setup::taylor_green(n, re, c, 0.0);
+    params.background_pressure = pb;
+    params.viscous_term = if std::env::var("VISC").as_deref() == Ok("morris") {
+        sonoflow_sph::ViscousTerm::Morris
+    } else {
+        sonoflow_sph::ViscousTerm::MeanValue
     };
+    params.shifting = std::env::var("SHIFT").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    params.density_diffusion = std::env::var("DELTA").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
     let mut s = Solver::new(params, p, 0.0)?;
     let e0 = s.diagnostics().kinetic_energy;
     let rate = 8.0 * PI * PI / re;

@@ -153,3 +153,35 @@ impl OpenChannelConfig {
         (p, bs)
     }
 }
+
+/// Taylor–Green vortex on [0, L]², periodic in x and z (sph-validation.md §d), L = 1, U = 1, ρ₀ = 1:
+/// u = −U cos kx sin kz, w = U sin kx cos kz, p = −ρU²/4 (cos 2kx + cos 2kz), density ρ₀ + p/c²,
+/// on an n × n lattice. Returns the particles and the parameters (h = 1.2 dx, μ = ρ₀UL/Re, sound
+/// speed `c`, shifting coefficient `shifting`); the exact |u| decays as e^{−8π² t/Re}.
+pub fn taylor_green(n: usize, re: Real, c: Real, shifting: Real) -> (Particles, crate::params::SphParams) {
+    use crate::neighbours::Period;
+    let (l, u0, rho0) = (1.0, 1.0, 1.0);
+    let dx = l / n as Real;
+    let k = 2.0 * std::f64::consts::PI / l;
+    let mut p = Particles::default();
+    for j in 0..n {
+        for i in 0..n {
+            let (x, z) = ((i as Real + 0.5) * dx, (j as Real + 0.5) * dx);
+            let pr = -rho0 * u0 * u0 / 4.0 * ((2.0 * k * x).cos() + (2.0 * k * z).cos());
+            let (ux, uz) = (-u0 * (k * x).cos() * (k * z).sin(), u0 * (k * x).sin() * (k * z).cos());
+            p.push(x, z, ux, uz, rho0 + pr / (c * c), rho0 * dx * dx, ParticleKind::Fluid, (j * n + i) as u64);
+        }
+    }
+    let params = crate::params::SphParams {
+        h: 1.2 * dx,
+        rho0,
+        c,
+        mu: rho0 * u0 * l / re,
+        shifting,
+        periodic_x: Some(Period { min: 0.0, length: l }),
+        periodic_z: Some(Period { min: 0.0, length: l }),
+        dt_max: 1.0,
+        ..Default::default()
+    };
+    (p, params)
+}

@@ -2,9 +2,7 @@
 
 use sonoflow_sph::setup::ChannelConfig;
 use sonoflow_sph::womersley::forced_velocity;
-use sonoflow_sph::{
-    KernelKind, ParticleKind, Particles, Period, PulsatileForce, Real, Solver, SphParams, WaveformSpec,
-};
+use sonoflow_sph::{KernelKind, ParticleKind, Period, PulsatileForce, Real, Solver, SphParams, WaveformSpec};
 use std::f64::consts::PI;
 
 /// Least-squares fit of C + A cos(ωt) + B sin(ωt): returns (amplitude, phase lag in degrees
@@ -139,35 +137,9 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
     assert!(worst_profile <= 0.03, "profile error {worst_profile}");
 }
 
-/// Taylor–Green vortex on [0, L]², periodic in x and z, initial lattice (no jitter).
 fn taylor_green(n: usize, re: Real, shifting: Real, c: Real) -> (Solver, Real) {
-    let (l, u0, rho0) = (1.0, 1.0, 1.0);
-    let dx = l / n as Real;
-    let kk = 2.0 * PI / l;
-    let mut p = Particles::default();
-    let mut id = 0;
-    for j in 0..n {
-        for i in 0..n {
-            let (x, z) = ((i as Real + 0.5) * dx, (j as Real + 0.5) * dx);
-            let pr = -rho0 * u0 * u0 / 4.0 * ((2.0 * kk * x).cos() + (2.0 * kk * z).cos());
-            let ux = -u0 * (kk * x).cos() * (kk * z).sin();
-            let uz = u0 * (kk * x).sin() * (kk * z).cos();
-            p.push(x, z, ux, uz, rho0 + pr / (c * c), rho0 * dx * dx, ParticleKind::Fluid, id);
-            id += 1;
-        }
-    }
-    let params = SphParams {
-        h: 1.2 * dx,
-        rho0,
-        c,
-        mu: rho0 * u0 * l / re,
-        shifting,
-        periodic_x: Some(Period { min: 0.0, length: l }),
-        periodic_z: Some(Period { min: 0.0, length: l }),
-        dt_max: 1.0,
-        ..Default::default()
-    };
-    (Solver::new(params, p, 0.0).expect("valid"), dx)
+    let (p, params) = sonoflow_sph::setup::taylor_green(n, re, c, shifting);
+    (Solver::new(params, p, 0.0).expect("valid"), 1.0 / n as Real)
 }
 
 #[test]

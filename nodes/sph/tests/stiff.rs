@@ -111,29 +111,7 @@ fn sound_speed_10x_and_40x_the_flow_speed_give_the_same_flow_and_dt_scales_as_1_
 }
 
 fn taylor_green(n: usize, re: Real, shifting: Real) -> Solver {
-    let (l, u0, c) = (1.0, 1.0, 10.0);
-    let dx = l / n as Real;
-    let k = 2.0 * PI / l;
-    let mut p = Particles::default();
-    for j in 0..n {
-        for i in 0..n {
-            let (x, z) = ((i as Real + 0.5) * dx, (j as Real + 0.5) * dx);
-            let pr = -u0 * u0 / 4.0 * ((2.0 * k * x).cos() + (2.0 * k * z).cos());
-            let (ux, uz) = (-u0 * (k * x).cos() * (k * z).sin(), u0 * (k * x).sin() * (k * z).cos());
-            p.push(x, z, ux, uz, 1.0 + pr / (c * c), dx * dx, ParticleKind::Fluid, (j * n + i) as u64);
-        }
-    }
-    let params = SphParams {
-        h: 1.2 * dx,
-        rho0: 1.0,
-        c,
-        mu: u0 * l / re,
-        shifting,
-        periodic_x: Some(Period { min: 0.0, length: l }),
-        periodic_z: Some(Period { min: 0.0, length: l }),
-        dt_max: 1.0,
-        ..Default::default()
-    };
+    let (p, params) = sonoflow_sph::setup::taylor_green(n, re, 10.0, shifting);
     Solver::new(params, p, 0.0).expect("valid")
 }
 
