@@ -140,6 +140,25 @@ impl Particles {
         filt(&mut self.group, keep);
     }
 
+    /// Reorders all arrays so that particle `order[k]` becomes particle k (`order` a permutation).
+    pub fn permute(&mut self, order: &[u32]) {
+        fn perm<T: Copy>(v: &mut Vec<T>, order: &[u32], tmp: &mut Vec<T>) {
+            tmp.clear();
+            tmp.extend(order.iter().map(|&i| v[i as usize]));
+            std::mem::swap(v, tmp);
+        }
+        let mut f = Vec::with_capacity(order.len());
+        perm(&mut self.x, order, &mut f);
+        perm(&mut self.z, order, &mut f);
+        perm(&mut self.vx, order, &mut f);
+        perm(&mut self.vz, order, &mut f);
+        perm(&mut self.rho, order, &mut f);
+        perm(&mut self.mass, order, &mut f);
+        perm(&mut self.kind, order, &mut Vec::with_capacity(order.len()));
+        perm(&mut self.id, order, &mut Vec::with_capacity(order.len()));
+        perm(&mut self.group, order, &mut Vec::with_capacity(order.len()));
+    }
+
     /// Largest id + 1 (0 when empty): the next id that is certainly unused.
     pub fn next_free_id(&self) -> u64 {
         self.id.iter().max().map_or(0, |m| m + 1)
