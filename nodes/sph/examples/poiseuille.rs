@@ -30,6 +30,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             body_force: [f, 0.0],
             periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
             dt_max: 1.0,
+            integrator: if std::env::var("INTEGRATOR").as_deref() == Ok("single") {
+                sonoflow_sph::Integrator::SingleEvaluation
+            } else {
+                sonoflow_sph::Integrator::PredictorCorrector
+            },
             viscous_constant: if std::env::var("CONTINUOUS").is_ok() {
                 sonoflow_sph::ViscousConstant::SecondMoment
             } else {

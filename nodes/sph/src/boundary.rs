@@ -116,6 +116,14 @@ impl OpenBoundary {
         (dx * n[0] + dz * n[1], dx * t[0] + dz * t[1])
     }
 
+    /// Quick test: false when (x, z) is certainly farther than `margin` from the opening and the
+    /// reservoir (outside a square of half-side a + depth + margin around the opening's centre).
+    #[inline]
+    pub fn near(&self, x: Real, z: Real, margin: Real) -> bool {
+        let r = self.half_width + self.depth + margin;
+        (x - self.origin[0]).abs() <= r && (z - self.origin[1]).abs() <= r
+    }
+
     /// Global position of local (s, y).
     pub fn global(&self, s: Real, y: Real) -> [Real; 2] {
         let (n, t) = (self.normal, self.tangent());
@@ -298,7 +306,7 @@ pub fn extrapolate_density(
         sums.clear();
         sums.resize(n + 1, (0.0, 0)); // last entry: the whole opening
         for i in 0..p.len() {
-            if p.kind[i] != ParticleKind::Fluid {
+            if p.kind[i] != ParticleKind::Fluid || !b.spec.near(p.x[i], p.z[i], support) {
                 continue;
             }
             let (s, y) = b.spec.local(p.x[i], p.z[i]);
@@ -343,6 +351,9 @@ pub fn exchange(states: &mut [BoundaryState], p: &mut Particles, rho0: Real, nex
         match p.kind[i] {
             ParticleKind::Fluid => {
                 for (g, b) in states.iter_mut().enumerate() {
+                    if !b.spec.near(p.x[i], p.z[i], 0.0) {
+                        continue;
+                    }
                     let (s, y) = b.spec.local(p.x[i], p.z[i]);
                     if s > 0.0 && s <= b.spec.depth && y.abs() <= b.spec.half_width + 0.5 * b.spec.dx {
                         p.kind[i] = ParticleKind::Buffer;
@@ -374,22 +385,25 @@ pub fn exchange(states: &mut [BoundaryState], p: &mut Particles, rho0: Real, nex
     if any_removed {
         p.retain_indices(keep);
     }
-    // Creation at the far side, lane by lane.
+    // Creation at the far side, lane by lane: per boundary and lane the outermost s and its
+    // density, from one pass over the particles.
     let mut created = Particles::default();
-    for (g, b) in states.iter_mut().enumerate() {
-        let n = b.spec.n_lanes();
-        let ds = b.spec.stream_spacing();
-        // per lane: outermost s and its density
-        let mut outer: Vec<(Real, Real)> = vec![(-0.5 * ds, rho0); n];
-        for i in 0..p.len() {
-            if p.kind[i] == ParticleKind::Buffer && p.group[i] as usize == g {
-                let (s, y) = b.spec.local(p.x[i], p.z[i]);
-                let j = b.spec.lane_of(y);
-                if s > outer[j].0 {
-                    outer[j] = (s, p.rho[i]);
-                }
+    let mut outers: Vec<Vec<(Real, Real)>> =
+        states.iter().map(|b| vec![(-0.5 * b.spec.stream_spacing(), rho0); b.spec.n_lanes()]).collect();
+    for i in 0..p.len() {
+        if p.kind[i] == ParticleKind::Buffer {
+            let g = p.group[i] as usize;
+            let b = &states[g];
+            let (s, y) = b.spec.local(p.x[i], p.z[i]);
+            let j = b.spec.lane_of(y);
+            let o = &mut outers[g][j];
+            if s > o.0 {
+                *o = (s, p.rho[i]);
             }
         }
+    }
+    for ((g, b), outer) in states.iter_mut().enumerate().zip(&outers) {
+        let ds = b.spec.stream_spacing();
         let mass = rho0 * b.spec.dx * b.spec.dx;
         for (j, &(mut s_out, rho)) in outer.iter().enumerate() {
             let y = b.spec.lane_y(j);

@@ -45,7 +45,7 @@ pub use boundary::{BoundaryFlux, OpenBoundary, ProfileKind};
 pub use checkpoint::{Checkpoint, CheckpointError, CheckpointHeader};
 pub use kernel::{Kernel, KernelKind};
 pub use neighbours::{CellList, Period};
-pub use params::{ParamError, PulsatileForce, SphParams, ViscousConstant, ViscousTerm};
+pub use params::{Integrator, ParamError, PulsatileForce, SphParams, ViscousConstant, ViscousTerm};
 pub use particles::{ParticleKind, Particles};
 pub use solver::{BlowUpCriterion, Diagnostics, DtCriterion, Solver, SphError, StepReport};
 pub use walls::{Domain, WallMotion};

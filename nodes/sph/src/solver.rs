@@ -20,11 +20,11 @@ use crate::checkpoint::{Checkpoint, CheckpointHeader};
 use crate::fast::{self, FastWorkspace};
 use crate::kernel::Kernel;
 use crate::neighbours::CellList;
-use crate::params::{ParamError, SphParams};
+use crate::params::{Integrator, ParamError, SphParams};
 use crate::particles::{ParticleKind, Particles};
 use crate::walls::{BuiltMotion, Domain, WallMotion};
 use crate::waveform::Waveform;
-use crate::wcsph::{compute_rates, Workspace};
+use crate::wcsph::{compute_rates, Rate, Workspace};
 use crate::Real;
 
 /// Steps between two reorderings of the particle arrays by cell ([`Solver::reorder_by_cell`]).
@@ -198,6 +198,11 @@ pub struct Solver {
     min_pair: (Real, u64),
     /// Σ |δr_shift|² and Σ |u Δt|² over fluid particles and steps (shifting diagnostics).
     shift_sums: (Real, Real),
+    /// Rates used by the predictor and the time step (state n, or carried over from the last
+    /// half-step evaluation with [`Integrator::SingleEvaluation`]).
+    rates0: Vec<Rate>,
+    /// `rates0` is aligned with the particles and may be reused.
+    carried: bool,
 }
 
 impl Solver {
@@ -261,6 +266,8 @@ impl Solver {
             checked: false,
             min_pair: (Real::INFINITY, 0),
             shift_sums: (0.0, 0.0),
+            rates0: Vec::new(),
+            carried: false,
         };
         s.wrap_positions();
         Ok(s)
@@ -550,9 +557,14 @@ impl Solver {
     /// Sets the time-dependent boundary data (moving walls, reservoir velocities and densities) to
     /// time t.
     fn set_boundary_time(&mut self, t: Real) {
+        self.set_boundary_time_with(t, true);
+    }
+
+    /// [`Solver::set_boundary_time`], the reservoir densities only when `densities`.
+    fn set_boundary_time_with(&mut self, t: Real, densities: bool) {
         self.move_walls(t);
         boundary::impose(&mut self.boundaries, &mut self.particles, t);
-        if !self.boundaries.is_empty() {
+        if densities && !self.boundaries.is_empty() {
             let support = self.kernel.support_radius();
             boundary::extrapolate_density(
                 &self.boundaries,
@@ -598,7 +610,7 @@ impl Solver {
         for i in 0..self.particles.len() {
             match self.particles.kind[i] {
                 ParticleKind::Fluid => {
-                    let a = self.ws.rates[i].acc;
+                    let a = self.rates0[i].acc;
                     let a2 = a[0] * a[0] + a[1] * a[1];
                     if a2 > amax2 {
                         amax2 = a2;
@@ -630,9 +642,16 @@ impl Solver {
     pub fn step(&mut self, dt_limit: Option<Real>) -> Result<StepReport, SphError> {
         self.check_ready()?;
         let t_n = self.time;
-        self.set_boundary_time(t_n);
-        self.evaluate(t_n);
-        self.check_rates()?;
+        let single = self.params.integrator == Integrator::SingleEvaluation;
+        let reuse = single && self.carried && self.rates0.len() == self.particles.len();
+        // with carried rates nothing is evaluated at t_n: the reservoir densities are not needed
+        self.set_boundary_time_with(t_n, !reuse);
+        if !reuse {
+            self.evaluate(t_n);
+            self.check_rates()?;
+            self.rates0.clone_from(&self.ws.rates);
+        }
+        self.carried = false;
         let (mut dt, mut binding, amax_i) = self.adaptive_dt();
         if let Some(first) = self.first_dt {
             let threshold = first * self.params.dt_collapse_ratio;
@@ -661,7 +680,7 @@ impl Solver {
         {
             let pt = &mut self.particles;
             for i in 0..n {
-                let r = self.ws.rates[i];
+                let r = self.rates0[i];
                 match pt.kind[i] {
                     ParticleKind::Fluid => {
                         pt.vx[i] += half * r.acc[0];
@@ -695,6 +714,7 @@ impl Solver {
         // Corrector and final update.
         let mut max_err = 0.0 as Real;
         let mut worst = 0usize;
+        let mut first_bad: Option<usize> = None;
         {
             let pt = &mut self.particles;
             let rho_ref = self.params.rho0;
@@ -724,13 +744,14 @@ impl Solver {
                         worst = i;
                     }
                 }
+                // a sum is finite only if every term is (inf − inf is NaN)
+                if first_bad.is_none() && !(pt.x[i] + pt.z[i] + pt.vx[i] + pt.vz[i] + pt.rho[i]).is_finite() {
+                    first_bad = Some(i);
+                }
             }
         }
-        for i in 0..n {
+        if let Some(i) = first_bad {
             let pt = &self.particles;
-            if pt.kind[i].is_wall() {
-                continue;
-            }
             let vals = [
                 ("position", pt.x[i]),
                 ("position", pt.z[i]),
@@ -738,9 +759,8 @@ impl Solver {
                 ("velocity", pt.vz[i]),
                 ("density", pt.rho[i]),
             ];
-            if let Some((q, _)) = vals.iter().find(|(_, v)| !v.is_finite()) {
-                return Err(self.blow_up(i, BlowUpCriterion::NonFinite { quantity: q }));
-            }
+            let q = vals.iter().find(|(_, v)| !v.is_finite()).map_or("value", |(q, _)| q);
+            return Err(self.blow_up(i, BlowUpCriterion::NonFinite { quantity: q }));
         }
         if max_err > self.params.density_error_limit {
             let limit = self.params.density_error_limit;
@@ -754,6 +774,11 @@ impl Solver {
         if (self.steps + 1).is_multiple_of(4) {
             self.guard(t_new);
         }
+        if single {
+            // the half-step rates become the next predictor's (swap: no copy; the next evaluation
+            // refills the workspace)
+            std::mem::swap(&mut self.rates0, &mut self.ws.rates);
+        }
         // profiles at t_new for the particles the exchange creates or converts; the next step's
         // first stage imposes velocities and extrapolates densities at the same time
         for b in &mut self.boundaries {
@@ -766,6 +791,21 @@ impl Solver {
             &mut self.next_id,
             &mut self.keep,
         );
+        if single {
+            // keep the carried rates aligned with the particles the exchange removed and created
+            if !self.boundaries.is_empty() && self.keep.len() == self.rates0.len() {
+                let mut j = 0;
+                for i in 0..self.keep.len() {
+                    if self.keep[i] {
+                        self.rates0[j] = self.rates0[i];
+                        j += 1;
+                    }
+                }
+                self.rates0.truncate(j);
+            }
+            self.rates0.resize(self.particles.len(), Rate::default());
+            self.carried = true;
+        }
         self.time = t_new;
         self.steps += 1;
         if self.steps.is_multiple_of(REORDER_INTERVAL) {
@@ -805,6 +845,9 @@ impl Solver {
             // lanes and move with the imposed profile, and shifting across the opening would move
             // fluid out faster than the flow does (measured: −0.3 % of the particles in 0.1 s)
             for b in &self.boundaries {
+                if !b.spec.near(p.x[i], p.z[i], support) {
+                    continue;
+                }
                 let (s, y) = b.spec.local(p.x[i], p.z[i]);
                 if s > -support && y.abs() <= b.spec.half_width + support {
                     let n = b.spec.normal;
@@ -838,7 +881,12 @@ impl Solver {
     fn reorder_by_cell(&mut self) {
         let r = self.kernel.support_radius();
         self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
-        self.particles.permute(self.cells.sorted_indices());
+        let order = self.cells.sorted_indices();
+        self.particles.permute(order);
+        if self.carried && self.rates0.len() == order.len() {
+            let permuted: Vec<Rate> = order.iter().map(|&i| self.rates0[i as usize]).collect();
+            self.rates0 = permuted;
+        }
     }
 
     /// Anti-penetration guard (see [`Solver::with_domain`]).
