@@ -87,6 +87,18 @@ pub fn field_error(
     nz: usize,
     margin: usize,
 ) -> FieldError {
+    field_error_samples(truth, est, nx, nz, margin).0
+}
+
+/// [`field_error`] and the per-pixel errors it summarises, `(e_x, e_z)` (fractions of `v_max`,
+/// one per counted pixel with an estimate, row-major order): the report's histograms.
+pub fn field_error_samples(
+    truth: (&[f32], &[f32], &[f32]),
+    est: (&[f32], &[f32], Option<&[f32]>),
+    nx: usize,
+    nz: usize,
+    margin: usize,
+) -> (FieldError, Vec<f64>, Vec<f64>) {
     let (tvx, tvz, mask) = truth;
     let (vx, vz, flags) = est;
     let inside = |ix: usize, iz: usize| mask[iz * nx + ix] > 0.5;
@@ -99,7 +111,7 @@ pub fn field_error(
         .fold(0.0, f64::max);
     let mut out = FieldError { v_max, ..Default::default() };
     if v_max <= 0.0 || nx <= 2 * margin || nz <= 2 * margin {
-        return out;
+        return (out, Vec::new(), Vec::new());
     }
     let (mut ex, mut ez) = (Vec::new(), Vec::new());
     for iz in margin..nz - margin {
@@ -119,7 +131,7 @@ pub fn field_error(
     }
     out.x = error_stats(&ex);
     out.z = error_stats(&ez);
-    out
+    (out, ex, ez)
 }
 
 #[cfg(test)]

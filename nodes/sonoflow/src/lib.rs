@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod evaluate;
+pub mod figures;
 pub mod kinds;
 pub mod launch;
 pub mod node_beamform;

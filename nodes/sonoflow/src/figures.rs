@@ -1,0 +1,1120 @@
+//! PNG figures of the run report (`<run>/figures/`): colour Doppler maps per angle pair, the
+//! estimated vector field over the true speed, error histograms of vx and vz (paper 1's figures
+//! 5–7) and the stage times. Plain slices in, a PNG file and a [`Figure`] (path, title, one-line
+//! caption, size) out; no IPC, so the tests call these directly. The evaluator node draws the
+//! first three at the end of its stream, the launcher the stage times after the run.
+//!
+//! Rendering is pure Rust: plotters' bitmap backend, text through ab_glyph with an embedded
+//! subset of DejaVu Sans (`assets/fonts/`, no system font library), PNG encoding with `png`.
+//! Callers treat every error as a warning ([`guarded`] also turns a panic into one): a figure
+//! never makes a run fail.
+
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::{Deserialize, Serialize};
+use sonoflow_messages::GridV1;
+use std::path::Path;
+
+/// Sub-folder of the run folder holding the figures.
+pub const DIR: &str = "figures";
+/// File names.
+pub const DOPPLER: &str = "doppler_maps.png";
+pub const VECTORS: &str = "vector_field.png";
+pub const ERRORS: &str = "error_histograms.png";
+pub const STAGES: &str = "stage_times.png";
+
+/// One written figure, as listed in `report.json` / `evaluation.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Figure {
+    /// Path relative to the run folder (`figures/NAME.png`).
+    pub path: String,
+    pub title: String,
+    /// One line: how to read it.
+    pub caption: String,
+    /// Size in pixels.
+    pub width: u32,
+    pub height: u32,
+}
+
+const FAMILY: &str = "sans-serif";
+static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans-subset.ttf");
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+fn de<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("drawing: {e}")
+}
+
+fn ensure_font() -> anyhow::Result<()> {
+    static OK: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if *OK.get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok()) {
+        Ok(())
+    } else {
+        anyhow::bail!("the embedded font does not load")
+    }
+}
+
+/// Runs `f`, turning an error or a panic into a warning line `"figure WHAT: …"`.
+pub fn guarded<T>(what: &str, f: impl FnOnce() -> anyhow::Result<T>) -> Result<T, String> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(format!("figure {what}: {e:#}")),
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| p.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "panic".into());
+            Err(format!("figure {what}: the plotting code panicked: {msg}"))
+        }
+    }
+}
+
+/// Linear map of one chart's data coordinates to image pixels (the tests probe figures with it).
+#[derive(Clone, Copy, Debug)]
+pub struct PanelMap {
+    x: (f64, f64),
+    y: (f64, f64),
+}
+
+impl PanelMap {
+    fn of(c: &Chart<'_, '_>) -> Self {
+        let (xr, yr) = (c.x_range(), c.y_range());
+        let p0 = c.backend_coord(&(xr.start, yr.start));
+        let p1 = c.backend_coord(&(xr.end, yr.end));
+        let sx = if xr.end != xr.start { (p1.0 - p0.0) as f64 / (xr.end - xr.start) } else { 0.0 };
+        let sy = if yr.end != yr.start { (p1.1 - p0.1) as f64 / (yr.end - yr.start) } else { 0.0 };
+        Self { x: (p0.0 as f64 - sx * xr.start, sx), y: (p0.1 as f64 - sy * yr.start, sy) }
+    }
+    /// Pixel (column, row) of data point (x, y).
+    pub fn pixel(&self, x: f64, y: f64) -> (f64, f64) {
+        (self.x.0 + self.x.1 * x, self.y.0 + self.y.1 * y)
+    }
+}
+
+/// Renders on a `w × h` white canvas and writes the PNG to `path` (atomically).
+fn render<T>(path: &Path, (w, h): (u32, u32), draw: impl FnOnce(&Area<'_>) -> anyhow::Result<T>) -> anyhow::Result<T> {
+    ensure_font()?;
+    let mut buf = vec![255u8; w as usize * h as usize * 3];
+    let out = {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let out = draw(&root)?;
+        root.present().map_err(de)?;
+        out
+    };
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    crate::nodeutil::write_atomic(path, &encode_png(&buf, w, h)?)?;
+    Ok(out)
+}
+
+/// RGB8 → PNG bytes (adaptive filters, default deflate: tens of milliseconds per figure).
+pub fn encode_png(rgb: &[u8], w: u32, h: u32) -> anyhow::Result<Vec<u8>> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Default);
+        enc.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
+        let mut wr = enc.write_header()?;
+        wr.write_image_data(rgb)?;
+        wr.finish()?;
+    }
+    Ok(out)
+}
+
+fn figure(name: &str, title: String, caption: String, (width, height): (u32, u32)) -> Figure {
+    Figure { path: format!("{DIR}/{name}"), title, caption, width, height }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Colour maps
+
+/// Colour Doppler map of `t = v / v_Nyquist`: black at 0, red (t = ½) to yellow (t ≥ 1) toward
+/// the probe, blue (t = −½) to cyan (t ≤ −1) away from it.
+pub fn doppler_colour(t: f64) -> RGBColor {
+    let t = if t.is_finite() { t.clamp(-1.0, 1.0) } else { 0.0 };
+    let a = t.abs();
+    let main = (510.0 * a.min(0.5)).round() as u8;
+    let hi = (510.0 * (a - 0.5).max(0.0)).round() as u8;
+    if t >= 0.0 {
+        RGBColor(main, hi, 0)
+    } else {
+        RGBColor(0, hi, main)
+    }
+}
+
+/// Grey level of a power `db` decibels relative to the reference (40 dB span: −40 dB black,
+/// 0 dB light grey 200): the background where colour Doppler shows no flow.
+pub fn power_grey(db: f64) -> RGBColor {
+    let l = if db.is_finite() { ((db + 40.0) / 40.0).clamp(0.0, 1.0) } else { 0.0 };
+    let g = (200.0 * l).round() as u8;
+    RGBColor(g, g, g)
+}
+
+/// Sequential speed colour map (viridis' control points) of `t` in [0, 1].
+pub fn speed_colour(t: f64) -> RGBColor {
+    const P: [(f64, [f64; 3]); 5] = [
+        (0.0, [68.0, 1.0, 84.0]),
+        (0.25, [59.0, 82.0, 139.0]),
+        (0.5, [33.0, 145.0, 140.0]),
+        (0.75, [94.0, 201.0, 98.0]),
+        (1.0, [253.0, 231.0, 37.0]),
+    ];
+    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
+    let k = P.windows(2).position(|w| t <= w[1].0).unwrap_or(P.len() - 2);
+    let ((t0, c0), (t1, c1)) = (P[k], P[k + 1]);
+    let f = (t - t0) / (t1 - t0);
+    let c = |i: usize| (c0[i] + f * (c1[i] - c0[i])).round() as u8;
+    RGBColor(c(0), c(1), c(2))
+}
+
+/// Outside the vessel in the vector figure.
+pub const OUTSIDE: RGBColor = RGBColor(235, 235, 235);
+/// Histogram bars, stage-time bars.
+pub const BAR: RGBColor = RGBColor(31, 119, 180);
+pub const BAR2: RGBColor = RGBColor(255, 127, 14);
+
+// ---------------------------------------------------------------------------------------------
+// Grid panels
+
+fn n_of(g: &GridV1) -> (usize, usize) {
+    (g.nx as usize, g.nz as usize)
+}
+
+/// Extent of the grid's cells in mm: (x_left, x_right, z_top, z_bottom).
+fn extent_mm(g: &GridV1) -> (f64, f64, f64, f64) {
+    let (nx, nz) = n_of(g);
+    let x0 = (g.x0 - 0.5 * g.dx) * 1e3;
+    let z0 = (g.z0 - 0.5 * g.dz) * 1e3;
+    (x0, x0 + nx as f64 * g.dx * 1e3, z0, z0 + nz as f64 * g.dz * 1e3)
+}
+
+fn check_grid(g: &GridV1, planes: &[(&str, usize)]) -> anyhow::Result<()> {
+    let (nx, nz) = n_of(g);
+    if nx == 0 || nz == 0 || !(g.dx > 0.0 && g.dz > 0.0 && g.x0.is_finite() && g.z0.is_finite()) {
+        anyhow::bail!("empty or invalid grid ({nx} × {nz}, dx {} m, dz {} m)", g.dx, g.dz);
+    }
+    for (name, len) in planes {
+        if *len != nx * nz {
+            anyhow::bail!("plane `{name}` has {len} values for a {nx} × {nz} grid");
+        }
+    }
+    Ok(())
+}
+
+/// Plot-area height for a plot-area width, keeping the grid's aspect ratio where it can.
+fn plot_height(g: &GridV1, plot_w: u32) -> u32 {
+    let (xa, xb, za, zb) = extent_mm(g);
+    ((plot_w as f64 * (zb - za) / (xb - xa)).round() as u32).clamp(120, 640)
+}
+
+const CAPTION_H: u32 = 28;
+const XLABEL_H: u32 = 40;
+const YLABEL_W: u32 = 50;
+const MARGIN: u32 = 6;
+
+/// Panel size for a plot area `plot_w × plot_h`.
+fn panel_size(plot_w: u32, plot_h: u32) -> (u32, u32) {
+    (plot_w + YLABEL_W + 2 * MARGIN, plot_h + CAPTION_H + XLABEL_H + 2 * MARGIN)
+}
+
+fn grid_chart<'a, 'b>(area: &'a Area<'b>, title: &str, g: &GridV1) -> anyhow::Result<Chart<'a, 'b>> {
+    let (xa, xb, za, zb) = extent_mm(g);
+    let mut c = ChartBuilder::on(area)
+        .caption(title, (FAMILY, 15))
+        .margin(MARGIN)
+        .x_label_area_size(XLABEL_H)
+        .y_label_area_size(YLABEL_W)
+        .build_cartesian_2d(xa..xb, zb..za)
+        .map_err(de)?;
+    let fx = tick_format((xb - xa) / 6.0);
+    let fz = tick_format((zb - za) / 6.0);
+    c.configure_mesh()
+        .disable_mesh()
+        .x_desc("x (mm)")
+        .y_desc("z (mm)")
+        .x_labels(6)
+        .y_labels(6)
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fz)
+        .label_style((FAMILY, 12))
+        .axis_desc_style((FAMILY, 13))
+        .draw()
+        .map_err(de)?;
+    Ok(c)
+}
+
+/// Tick labels with as many decimals as a tick spacing of about `step` needs.
+fn tick_format(step: f64) -> impl Fn(&f64) -> String {
+    let d = if step >= 1.0 {
+        0
+    } else if step >= 0.1 {
+        1
+    } else {
+        2
+    };
+    move |v: &f64| {
+        let v = if v.abs() < 1e-9 { 0.0 } else { *v };
+        format!("{v:.d$}")
+    }
+}
+
+/// One filled rectangle per grid cell, coloured by `colour(index)`.
+fn draw_cells(c: &mut Chart<'_, '_>, g: &GridV1, colour: impl Fn(usize) -> RGBColor) -> anyhow::Result<()> {
+    let (nx, nz) = n_of(g);
+    let (xa, _, za, _) = extent_mm(g);
+    let (dx, dz) = (g.dx * 1e3, g.dz * 1e3);
+    c.draw_series((0..nz).flat_map(|iz| (0..nx).map(move |ix| (ix, iz))).map(|(ix, iz)| {
+        let (x, z) = (xa + ix as f64 * dx, za + iz as f64 * dz);
+        Rectangle::new([(x, z), (x + dx, z + dz)], colour(iz * nx + ix).filled())
+    }))
+    .map_err(de)?;
+    Ok(())
+}
+
+/// Outline of `mask > 0.5` along the cell edges.
+fn draw_outline(c: &mut Chart<'_, '_>, g: &GridV1, mask: &[f32], colour: RGBColor) -> anyhow::Result<()> {
+    let (nx, nz) = n_of(g);
+    let (xa, _, za, _) = extent_mm(g);
+    let (dx, dz) = (g.dx * 1e3, g.dz * 1e3);
+    let inside = |ix: usize, iz: usize| mask[iz * nx + ix] > 0.5;
+    let mut segs = Vec::new();
+    for iz in 0..nz {
+        for ix in 0..nx {
+            let (x, z) = (xa + ix as f64 * dx, za + iz as f64 * dz);
+            if ix + 1 < nx && inside(ix, iz) != inside(ix + 1, iz) {
+                segs.push([(x + dx, z), (x + dx, z + dz)]);
+            }
+            if iz + 1 < nz && inside(ix, iz) != inside(ix, iz + 1) {
+                segs.push([(x, z + dz), (x + dx, z + dz)]);
+            }
+        }
+    }
+    c.draw_series(segs.into_iter().map(|s| PathElement::new(s.to_vec(), colour.stroke_width(1)))).map_err(de)?;
+    Ok(())
+}
+
+/// Vertical colour bar from `lo` to `hi` (label `desc`).
+fn colour_bar(area: &Area<'_>, lo: f64, hi: f64, desc: &str, colour: impl Fn(f64) -> RGBColor) -> anyhow::Result<()> {
+    let mut c = ChartBuilder::on(area)
+        .margin_top(CAPTION_H + MARGIN)
+        .margin_bottom(XLABEL_H + MARGIN)
+        .margin_right(8)
+        .y_label_area_size(52)
+        .build_cartesian_2d(0f64..1.0, lo..hi)
+        .map_err(de)?;
+    c.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc(desc)
+        .y_labels(7)
+        .label_style((FAMILY, 12))
+        .axis_desc_style((FAMILY, 13))
+        .draw()
+        .map_err(de)?;
+    let n = 128;
+    c.draw_series((0..n).map(|k| {
+        let (a, b) = (lo + (hi - lo) * k as f64 / n as f64, lo + (hi - lo) * (k + 1) as f64 / n as f64);
+        Rectangle::new([(0.0, a), (1.0, b)], colour((k as f64 + 0.5) / n as f64).filled())
+    }))
+    .map_err(de)?;
+    Ok(())
+}
+
+fn title_row(area: &Area<'_>, title: &str) -> anyhow::Result<()> {
+    area.draw(&Text::new(title.to_string(), (10, 8), (FAMILY, 17).into_font().color(&BLACK))).map_err(de)?;
+    Ok(())
+}
+
+const TITLE_H: u32 = 32;
+const BAR_W: u32 = 100;
+
+// ---------------------------------------------------------------------------------------------
+// Colour Doppler maps
+
+/// One colour Doppler map (one transmit/receive angle pair), planes on `grid`.
+pub struct DopplerPanel<'a> {
+    pub title: String,
+    pub grid: GridV1,
+    /// Axial velocity (m/s, positive toward the probe).
+    pub velocity: &'a [f32],
+    /// Slow-time power (R0), for the display threshold and the grey background.
+    pub power: Option<&'a [f32]>,
+    /// Flag bits (1 = no estimate).
+    pub flags: Option<&'a [f32]>,
+    /// Aliasing limit (m/s): full colour at ±this.
+    pub nyquist: f64,
+}
+
+/// Colour is shown where the power is at most this many dB below the map's 99th percentile.
+pub const DOPPLER_THRESHOLD_DB: f64 = 20.0;
+
+fn p99(v: &[f32]) -> f64 {
+    let mut s: Vec<f64> = v.iter().map(|p| *p as f64).filter(|p| p.is_finite() && *p > 0.0).collect();
+    if s.is_empty() {
+        return 0.0;
+    }
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * 0.99).round() as usize]
+}
+
+/// The colour of pixel `i` of a Doppler panel (`pref`: its power reference, [`p99`]).
+fn doppler_pixel(p: &DopplerPanel<'_>, i: usize, pref: f64) -> RGBColor {
+    let no_est = p.flags.is_some_and(|f| (f[i] as u32) & 1 != 0);
+    let db = match p.power {
+        Some(pw) if pref > 0.0 => 10.0 * (pw[i] as f64 / pref).log10(),
+        _ => 0.0,
+    };
+    if no_est || !(db >= -DOPPLER_THRESHOLD_DB) {
+        power_grey(db)
+    } else {
+        doppler_colour(p.velocity[i] as f64 / p.nyquist)
+    }
+}
+
+/// `figures/doppler_maps.png`: one panel per angle pair (4 per row), a colour bar, the vessel's
+/// outline where `outline` (a mask on the panels' grid) is given.
+pub fn doppler_maps(
+    dir: &Path,
+    heading: &str,
+    panels: &[DopplerPanel<'_>],
+    outline: Option<&[f32]>,
+) -> anyhow::Result<Figure> {
+    doppler_maps_mapped(dir, heading, panels, outline).map(|r| r.0)
+}
+
+fn doppler_maps_mapped(
+    dir: &Path,
+    heading: &str,
+    panels: &[DopplerPanel<'_>],
+    outline: Option<&[f32]>,
+) -> anyhow::Result<(Figure, Vec<PanelMap>)> {
+    let first = panels.first().ok_or_else(|| anyhow::anyhow!("no Doppler maps"))?;
+    for p in panels {
+        let n = p.velocity.len();
+        let mut planes = vec![("velocity", n)];
+        planes.extend(p.power.map(|v| ("power", v.len())));
+        planes.extend(p.flags.map(|v| ("flags", v.len())));
+        check_grid(&p.grid, &planes)?;
+        if !(p.nyquist > 0.0 && p.nyquist.is_finite()) {
+            anyhow::bail!("{}: Nyquist velocity {} m/s", p.title, p.nyquist);
+        }
+    }
+    let cols = panels.len().min(4);
+    let rows = panels.len().div_ceil(cols);
+    let plot_w = 300;
+    let plot_h = panels.iter().map(|p| plot_height(&p.grid, plot_w)).max().unwrap_or(plot_w);
+    let (pw, ph) = panel_size(plot_w, plot_h);
+    let size = (cols as u32 * pw + BAR_W, TITLE_H + rows as u32 * ph);
+    let same_vn = panels.iter().all(|p| (p.nyquist - first.nyquist).abs() <= 1e-9 * first.nyquist);
+    let outline = outline.filter(|m| panels.iter().all(|p| p.grid == first.grid && m.len() == p.velocity.len()));
+    let maps = render(&dir.join(DIR).join(DOPPLER), size, |root| {
+        let (top, rest) = root.split_vertically(TITLE_H);
+        title_row(&top, heading)?;
+        let (grid_area, bar) = rest.split_horizontally(cols as u32 * pw);
+        let mut maps = Vec::new();
+        for (k, p) in panels.iter().enumerate() {
+            let (r, col) = ((k / cols) as i32, (k % cols) as i32);
+            let area = grid_area.clone().shrink((col * pw as i32, r * ph as i32), (pw, ph));
+            let mut c = grid_chart(&area, &p.title, &p.grid)?;
+            let pref = p.power.map(p99).unwrap_or(0.0);
+            draw_cells(&mut c, &p.grid, |i| doppler_pixel(p, i, pref))?;
+            if let Some(m) = outline {
+                draw_outline(&mut c, &p.grid, m, WHITE)?;
+            }
+            maps.push(PanelMap::of(&c));
+        }
+        let bar = bar.shrink((0, 0), (BAR_W, ph));
+        if same_vn {
+            let vn = first.nyquist;
+            colour_bar(&bar, -vn, vn, "v toward probe (m/s)", |t| doppler_colour(2.0 * t - 1.0))?;
+        } else {
+            colour_bar(&bar, -1.0, 1.0, "v / v_Nyquist", |t| doppler_colour(2.0 * t - 1.0))?;
+        }
+        Ok(maps)
+    })?;
+    let fig = figure(
+        DOPPLER,
+        heading.to_string(),
+        format!(
+            "Colour Doppler per angle pair: axial velocity, red toward the probe and blue away, full colour at ± the Nyquist velocity (beyond it aliasing wraps red ↔ blue); grey (log power, 40 dB span) where the power is over {DOPPLER_THRESHOLD_DB:.0} dB below the map's 99th percentile or there is no estimate{}.",
+            if outline.is_some() { "; white: the true vessel wall" } else { "" }
+        ),
+        size,
+    );
+    Ok((fig, maps))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Vector field over the truth
+
+/// One estimated field (planes on the truth's grid).
+pub struct VectorPanel<'a> {
+    pub name: String,
+    pub vx: &'a [f32],
+    pub vz: &'a [f32],
+    /// Flag bits (1 = no estimate): no arrow.
+    pub flags: Option<&'a [f32]>,
+}
+
+/// Arrow spacing (grid cells) for a grid: about 16 arrows across the larger side.
+pub fn arrow_step(nx: usize, nz: usize) -> usize {
+    (nx.max(nz) as f64 / 16.0).round().max(1.0) as usize
+}
+
+fn draw_arrow(root: &Area<'_>, tail: (f64, f64), tip: (f64, f64)) -> anyhow::Result<()> {
+    let (dx, dy) = (tip.0 - tail.0, tip.1 - tail.1);
+    let len = dx.hypot(dy);
+    if len < 1.5 {
+        return Ok(());
+    }
+    let (ux, uy) = (dx / len, dy / len);
+    let head = (0.35 * len).clamp(3.0, 7.0);
+    let (c, s) = (25f64.to_radians().cos(), 25f64.to_radians().sin());
+    let wing = |sgn: f64| {
+        let (rx, ry) = (-ux * c - sgn * uy * s, -uy * c + sgn * ux * s);
+        ((tip.0 + head * rx).round() as i32, (tip.1 + head * ry).round() as i32)
+    };
+    let p = |q: (f64, f64)| (q.0.round() as i32, q.1.round() as i32);
+    let path = vec![p(tail), p(tip), wing(1.0), p(tip), wing(-1.0)];
+    root.draw(&PathElement::new(path.clone(), WHITE.stroke_width(3))).map_err(de)?;
+    root.draw(&PathElement::new(path, BLACK.stroke_width(1))).map_err(de)?;
+    Ok(())
+}
+
+/// `figures/vector_field.png`: per estimate a panel with the true speed inside the vessel as
+/// colour and the estimated vectors as arrows (every [`arrow_step`] cells, length ∝ speed,
+/// v_max ↔ 0.9 steps, capped at twice that), plus the speed colour bar.
+pub fn vector_field(
+    dir: &Path,
+    heading: &str,
+    grid: &GridV1,
+    truth: (&[f32], &[f32], &[f32]),
+    panels: &[VectorPanel<'_>],
+) -> anyhow::Result<Figure> {
+    vector_field_mapped(dir, heading, grid, truth, panels).map(|r| r.0)
+}
+
+fn vector_field_mapped(
+    dir: &Path,
+    heading: &str,
+    grid: &GridV1,
+    truth: (&[f32], &[f32], &[f32]),
+    panels: &[VectorPanel<'_>],
+) -> anyhow::Result<(Figure, Vec<PanelMap>)> {
+    let (tvx, tvz, mask) = truth;
+    check_grid(grid, &[("truth vx", tvx.len()), ("truth vz", tvz.len()), ("mask", mask.len())])?;
+    if panels.is_empty() {
+        anyhow::bail!("no estimated field");
+    }
+    for p in panels {
+        let mut planes = vec![("vx", p.vx.len()), ("vz", p.vz.len())];
+        planes.extend(p.flags.map(|f| ("flags", f.len())));
+        check_grid(grid, &planes)?;
+    }
+    let speed: Vec<f64> = tvx.iter().zip(tvz).map(|(a, b)| (*a as f64).hypot(*b as f64)).collect();
+    let v_max = speed.iter().zip(mask).filter(|(s, m)| **m > 0.5 && s.is_finite()).map(|(s, _)| *s).fold(0.0, f64::max);
+    if v_max <= 0.0 {
+        anyhow::bail!("the true field has no speed inside the vessel");
+    }
+    let (nx, nz) = n_of(grid);
+    let step = arrow_step(nx, nz);
+    let plot_w = 360;
+    let plot_h = plot_height(grid, plot_w);
+    let (pw, ph) = panel_size(plot_w, plot_h);
+    let size = (panels.len() as u32 * pw + BAR_W, TITLE_H + ph);
+    let (xa, _, za, _) = extent_mm(grid);
+    let (dx, dz) = (grid.dx * 1e3, grid.dz * 1e3);
+    let scale = 0.9 * step as f64 * dx.min(dz) / v_max; // mm per m/s
+    let maps = render(&dir.join(DIR).join(VECTORS), size, |root| {
+        let (top, rest) = root.split_vertically(TITLE_H);
+        title_row(&top, heading)?;
+        let (grid_area, bar) = rest.split_horizontally(panels.len() as u32 * pw);
+        let mut maps = Vec::new();
+        for (k, p) in panels.iter().enumerate() {
+            let area = grid_area.clone().shrink((k as i32 * pw as i32, 0), (pw, ph));
+            let mut c = grid_chart(&area, &p.name, grid)?;
+            draw_cells(&mut c, grid, |i| if mask[i] > 0.5 { speed_colour(speed[i] / v_max) } else { OUTSIDE })?;
+            let map = PanelMap::of(&c);
+            for iz in (step / 2..nz).step_by(step) {
+                for ix in (step / 2..nx).step_by(step) {
+                    let i = iz * nx + ix;
+                    let (vx, vz) = (p.vx[i] as f64, p.vz[i] as f64);
+                    if mask[i] <= 0.5
+                        || p.flags.is_some_and(|f| (f[i] as u32) & 1 != 0)
+                        || !(vx.is_finite() && vz.is_finite())
+                    {
+                        continue;
+                    }
+                    let cap = (2.0 * v_max / vx.hypot(vz)).min(1.0);
+                    let (x, z) = (xa + (ix as f64 + 0.5) * dx, za + (iz as f64 + 0.5) * dz);
+                    let tip = (x + scale * cap * vx, z + scale * cap * vz);
+                    draw_arrow(root, map.pixel(x, z), map.pixel(tip.0, tip.1))?;
+                }
+            }
+            maps.push(map);
+        }
+        let bar = bar.shrink((0, 0), (BAR_W, ph));
+        colour_bar(&bar, 0.0, v_max, "true speed (m/s)", speed_colour)?;
+        Ok(maps)
+    })?;
+    let fig = figure(
+        VECTORS,
+        heading.to_string(),
+        format!(
+            "Colour: the true speed inside the vessel (grey outside); arrows: the estimated velocity every {step} pixels, v_max = {v_max:.3} m/s drawn {:.2} mm long (capped at twice that); arrows should follow the colour's flow and match it in length.",
+            scale * v_max
+        ),
+        size,
+    );
+    Ok((fig, maps))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Error histograms
+
+/// Per-pixel errors of one estimated field (fractions of v_max): the evaluator's samples.
+pub struct ErrorSample<'a> {
+    pub name: String,
+    pub ex: &'a [f64],
+    pub ez: &'a [f64],
+}
+
+/// Counts of `values` in `n` equal bins over `[lo, hi)`; values below/above go to the first/last
+/// bin, non-finite values nowhere.
+pub fn histogram(values: &[f64], lo: f64, hi: f64, n: usize) -> Vec<usize> {
+    let mut h = vec![0; n];
+    if n == 0 || !(hi > lo) {
+        return h;
+    }
+    for v in values.iter().filter(|v| v.is_finite()) {
+        let k = ((v - lo) / (hi - lo) * n as f64).floor();
+        let k = if k < 0.0 { 0 } else { (k as usize).min(n - 1) };
+        h[k] += 1;
+    }
+    h
+}
+
+/// Half-width of the histogram axis (fraction of v_max): the next of 1, 2, 5 × 10^k above the
+/// 99th percentile of |e| (over all fields), at least 1.5 × `criterion`.
+pub fn error_axis(samples: &[&[f64]], criterion: f64) -> f64 {
+    let mut a: Vec<f64> = samples.iter().flat_map(|s| s.iter()).filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    a.sort_by(f64::total_cmp);
+    let p = if a.is_empty() { 0.0 } else { a[((a.len() - 1) as f64 * 0.99).round() as usize] };
+    let want = p.max(1.5 * criterion).min(10.0);
+    let mut r = 1e-3;
+    for k in 0.. {
+        let base = 10f64.powi(k - 3);
+        if let Some(m) = [1.0, 2.0, 5.0].iter().map(|m| m * base).find(|v| *v >= want * (1.0 - 1e-12)) {
+            r = m;
+            break;
+        }
+        if k > 8 {
+            break;
+        }
+    }
+    r
+}
+
+/// Bins of each histogram.
+pub const HIST_BINS: usize = 40;
+/// The paper's criteria (fractions of v_max): vx within ±10 %, vz within ±2 %.
+pub const CRITERIA: [f64; 2] = [0.10, 0.02];
+
+/// `figures/error_histograms.png`: rows = fields, columns = vx, vz; percent of pixels per bin of
+/// the error in % of v_max, with bias, RMS and |e|₇₅ in each panel.
+pub fn error_histograms(dir: &Path, heading: &str, fields: &[ErrorSample<'_>]) -> anyhow::Result<Figure> {
+    error_histograms_mapped(dir, heading, fields).map(|r| r.0)
+}
+
+fn error_histograms_mapped(
+    dir: &Path,
+    heading: &str,
+    fields: &[ErrorSample<'_>],
+) -> anyhow::Result<(Figure, Vec<PanelMap>)> {
+    if fields.is_empty() || fields.iter().all(|f| f.ex.is_empty() && f.ez.is_empty()) {
+        anyhow::bail!("no error samples");
+    }
+    let ranges = [
+        error_axis(&fields.iter().map(|f| f.ex).collect::<Vec<_>>(), CRITERIA[0]),
+        error_axis(&fields.iter().map(|f| f.ez).collect::<Vec<_>>(), CRITERIA[1]),
+    ];
+    let (pw, ph) = (430u32, 270u32);
+    let size = (2 * pw, TITLE_H + fields.len() as u32 * ph);
+    let maps = render(&dir.join(DIR).join(ERRORS), size, |root| {
+        let (top, rest) = root.split_vertically(TITLE_H);
+        title_row(&top, heading)?;
+        let mut maps = Vec::new();
+        for (r, f) in fields.iter().enumerate() {
+            for (col, (comp, e)) in [("vx", f.ex), ("vz", f.ez)].into_iter().enumerate() {
+                let area = rest.clone().shrink((col as i32 * pw as i32, r as i32 * ph as i32), (pw, ph));
+                let rng = ranges[col];
+                let counts = histogram(e, -rng, rng, HIST_BINS);
+                let total = e.iter().filter(|v| v.is_finite()).count().max(1) as f64;
+                let pct: Vec<f64> = counts.iter().map(|c| 100.0 * *c as f64 / total).collect();
+                let ymax = pct.iter().cloned().fold(0.0, f64::max).max(1.0) * 1.18;
+                let st = crate::evaluate::error_stats(e);
+                let mut c = ChartBuilder::on(&area)
+                    .caption(format!("{}: {comp} error ({} px)", f.name, e.len()), (FAMILY, 15))
+                    .margin(MARGIN)
+                    .margin_right(14)
+                    .x_label_area_size(XLABEL_H)
+                    .y_label_area_size(YLABEL_W)
+                    .build_cartesian_2d(-100.0 * rng..100.0 * rng, 0.0..ymax)
+                    .map_err(de)?;
+                let (fx, fy) = (tick_format(200.0 * rng / 8.0), tick_format(ymax / 6.0));
+                c.configure_mesh()
+                    .disable_x_mesh()
+                    .light_line_style(WHITE)
+                    .x_desc(format!("({comp} − {comp}_true) / v_max (%)"))
+                    .y_desc("pixels (%)")
+                    .x_labels(9)
+                    .y_labels(6)
+                    .x_label_formatter(&fx)
+                    .y_label_formatter(&fy)
+                    .label_style((FAMILY, 12))
+                    .axis_desc_style((FAMILY, 13))
+                    .draw()
+                    .map_err(de)?;
+                let w = 200.0 * rng / HIST_BINS as f64;
+                c.draw_series(pct.iter().enumerate().filter(|(_, p)| **p > 0.0).map(|(k, p)| {
+                    let x0 = -100.0 * rng + k as f64 * w;
+                    Rectangle::new([(x0 + 0.06 * w, 0.0), (x0 + 0.94 * w, *p)], BAR.filled())
+                }))
+                .map_err(de)?;
+                let crit = 100.0 * CRITERIA[col];
+                for x in [-crit, crit] {
+                    c.draw_series(std::iter::once(PathElement::new(
+                        vec![(x, 0.0), (x, ymax)],
+                        RGBColor(200, 60, 60).stroke_width(1),
+                    )))
+                    .map_err(de)?;
+                }
+                c.draw_series(std::iter::once(PathElement::new(vec![(0.0, 0.0), (0.0, ymax)], BLACK.stroke_width(1))))
+                    .map_err(de)?;
+                let text = format!(
+                    "bias {:+.1} %   RMS {:.1} %   |e|₇₅ {:.1} %",
+                    100.0 * st.bias + 0.0,
+                    100.0 * st.rms,
+                    100.0 * st.abs_p75
+                );
+                let pos = c.backend_coord(&(-100.0 * rng, ymax));
+                root.draw(&Text::new(text, (pos.0 + 6, pos.1 + 4), (FAMILY, 12).into_font().color(&BLACK)))
+                    .map_err(de)?;
+                maps.push(PanelMap::of(&c));
+            }
+        }
+        Ok(maps)
+    })?;
+    let fig = figure(
+        ERRORS,
+        heading.to_string(),
+        format!(
+            "Share of the vessel's pixels per bin of the error of vx and vz in % of the largest true speed (paper 1's figures 5–7); red lines: the paper's ±{:.0} % (vx) and ±{:.0} % (vz); the outermost bins also hold everything beyond the axis.",
+            100.0 * CRITERIA[0],
+            100.0 * CRITERIA[1]
+        ),
+        size,
+    );
+    Ok((fig, maps))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage times
+
+/// One node of the stage-time chart (None: no statistics reported).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageRow {
+    pub name: String,
+    /// Compute CPU (s): thread CPU spent producing messages.
+    pub compute_s: Option<f64>,
+    /// Wall time of the node's process (s).
+    pub wall_s: Option<f64>,
+}
+
+/// `figures/stage_times.png`: per node a compute-CPU bar (blue) above a wall-time bar (orange).
+pub fn stage_times(dir: &Path, heading: &str, rows: &[StageRow]) -> anyhow::Result<Figure> {
+    stage_times_mapped(dir, heading, rows).map(|r| r.0)
+}
+
+/// Row height of the stage chart (px).
+const STAGE_ROW_H: u32 = 34;
+
+fn stage_times_mapped(dir: &Path, heading: &str, rows: &[StageRow]) -> anyhow::Result<(Figure, Vec<PanelMap>)> {
+    if rows.is_empty() {
+        anyhow::bail!("no nodes");
+    }
+    let ok = |v: Option<f64>| v.filter(|s| s.is_finite() && *s >= 0.0);
+    let xmax = rows.iter().flat_map(|r| [ok(r.compute_s), ok(r.wall_s)]).flatten().fold(0.0, f64::max);
+    let xmax = if xmax > 0.0 { 1.22 * xmax } else { 1.0 };
+    let n = rows.len();
+    let name_w = rows.iter().map(|r| r.name.chars().count()).max().unwrap_or(4) as u32 * 8 + 20;
+    let label_w = name_w.clamp(70, 260);
+    let size = (760 + label_w, TITLE_H + n as u32 * STAGE_ROW_H + XLABEL_H + 40);
+    let nf = n as f64;
+    let maps = render(&dir.join(DIR).join(STAGES), size, |root| {
+        let (top, rest) = root.split_vertically(TITLE_H);
+        title_row(&top, heading)?;
+        let mut c = ChartBuilder::on(&rest)
+            .margin(MARGIN)
+            .margin_right(20)
+            .margin_top(30)
+            .x_label_area_size(XLABEL_H)
+            .y_label_area_size(label_w)
+            .build_cartesian_2d(0.0..xmax, 0.0..nf)
+            .map_err(de)?;
+        c.configure_mesh()
+            .disable_y_mesh()
+            .light_line_style(WHITE)
+            .x_desc("time (s)")
+            .y_labels(0)
+            .x_labels(8)
+            .label_style((FAMILY, 13))
+            .axis_desc_style((FAMILY, 13))
+            .draw()
+            .map_err(de)?;
+        let yc = |k: usize| nf - k as f64 - 0.5;
+        c.draw_series(rows.iter().enumerate().filter_map(|(k, r)| {
+            ok(r.compute_s).map(|v| Rectangle::new([(0.0, yc(k) + 0.04), (v, yc(k) + 0.38)], BAR.filled()))
+        }))
+        .map_err(de)?
+        .label("compute CPU")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], BAR.filled()));
+        c.draw_series(rows.iter().enumerate().filter_map(|(k, r)| {
+            ok(r.wall_s).map(|v| Rectangle::new([(0.0, yc(k) - 0.38), (v, yc(k) - 0.04)], BAR2.filled()))
+        }))
+        .map_err(de)?
+        .label("wall (process)")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], BAR2.filled()));
+        let name_style = (FAMILY, 13).into_font().color(&BLACK).pos(plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Right,
+            plotters::style::text_anchor::VPos::Center,
+        ));
+        for (k, r) in rows.iter().enumerate() {
+            let p = c.backend_coord(&(0.0, yc(k)));
+            root.draw(&Text::new(r.name.clone(), (p.0 - 8, p.1), name_style.clone())).map_err(de)?;
+            let style = (FAMILY, 12).into_font().color(&BLACK);
+            match (ok(r.compute_s), ok(r.wall_s)) {
+                (None, None) => {
+                    let p = c.backend_coord(&(0.0, yc(k)));
+                    root.draw(&Text::new("no statistics", (p.0 + 6, p.1 - 6), style)).map_err(de)?;
+                }
+                (cs, ws) => {
+                    for (v, dy) in [(cs, 0.21), (ws, -0.21)] {
+                        if let Some(v) = v {
+                            let p = c.backend_coord(&(v, yc(k) + dy));
+                            root.draw(&Text::new(format!("{v:.3} s"), (p.0 + 4, p.1 - 6), style.clone()))
+                                .map_err(de)?;
+                        }
+                    }
+                }
+            }
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.9))
+            .border_style(RGBColor(180, 180, 180))
+            .label_font((FAMILY, 12))
+            .draw()
+            .map_err(de)?;
+        // x in seconds, y in row units (row k centred at n − k − 0.5).
+        Ok(vec![PanelMap::of(&c)])
+    })?;
+    let fig = figure(
+        STAGES,
+        heading.to_string(),
+        "Per node, blue: compute CPU (thread CPU time spent producing messages), orange: wall time of its process, both in seconds; a long orange bar over a short blue one is a node that mostly waited.".into(),
+        size,
+    );
+    Ok((fig, maps))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
+        let dec = png::Decoder::new(std::fs::File::open(path).unwrap());
+        let mut rd = dec.read_info().unwrap();
+        let mut buf = vec![0; rd.output_buffer_size()];
+        let info = rd.next_frame(&mut buf).unwrap();
+        assert_eq!(info.color_type, png::ColorType::Rgb);
+        buf.truncate(info.buffer_size());
+        (info.width, info.height, buf)
+    }
+
+    fn px(img: &(u32, u32, Vec<u8>), (x, y): (f64, f64)) -> RGBColor {
+        let (x, y) = (x.round() as usize, y.round() as usize);
+        let i = 3 * (y * img.0 as usize + x);
+        RGBColor(img.2[i], img.2[i + 1], img.2[i + 2])
+    }
+
+    fn grid(n: u32) -> GridV1 {
+        GridV1 { x0: -0.01, z0: 0.01, dx: 0.5e-3, dz: 0.5e-3, nx: n, nz: n }
+    }
+
+    /// Centre (mm) of cell (ix, iz).
+    fn cell(g: &GridV1, ix: usize, iz: usize) -> (f64, f64) {
+        ((g.x0 + ix as f64 * g.dx) * 1e3, (g.z0 + iz as f64 * g.dz) * 1e3)
+    }
+
+    /// A disk of radius 10 cells in a 40 × 40 grid.
+    fn disk(n: usize) -> Vec<f32> {
+        (0..n * n)
+            .map(|i| {
+                let (x, z) = ((i % n) as f64 - 19.5, (i / n) as f64 - 19.5);
+                if x.hypot(z) < 10.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn colour_maps_have_the_documented_ends() {
+        assert_eq!(doppler_colour(0.0), RGBColor(0, 0, 0));
+        assert_eq!(doppler_colour(0.5), RGBColor(255, 0, 0));
+        assert_eq!(doppler_colour(1.0), RGBColor(255, 255, 0));
+        assert_eq!(doppler_colour(3.0), RGBColor(255, 255, 0));
+        assert_eq!(doppler_colour(-0.5), RGBColor(0, 0, 255));
+        assert_eq!(doppler_colour(-1.0), RGBColor(0, 255, 255));
+        assert_eq!(doppler_colour(f64::NAN), RGBColor(0, 0, 0));
+        assert_eq!(power_grey(0.0), RGBColor(200, 200, 200));
+        assert_eq!(power_grey(-40.0), RGBColor(0, 0, 0));
+        assert_eq!(power_grey(-20.0), RGBColor(100, 100, 100));
+        assert_eq!(speed_colour(0.0), RGBColor(68, 1, 84));
+        assert_eq!(speed_colour(1.0), RGBColor(253, 231, 37));
+        assert_eq!(speed_colour(0.5), RGBColor(33, 145, 140));
+        // Monotone in green across the map.
+        let g: Vec<u8> = (0..=10).map(|k| speed_colour(k as f64 / 10.0).1).collect();
+        assert!(g.windows(2).all(|w| w[1] > w[0]), "{g:?}");
+    }
+
+    #[test]
+    fn histogram_bins_a_known_distribution() {
+        // 100 values: 60 at +0.5 %, 30 at −1.5 %, 7 at +15 % (beyond the axis: last bin), 3 NaN.
+        let mut v = vec![0.005; 60];
+        v.extend(vec![-0.015; 30]);
+        v.extend(vec![0.15; 7]);
+        v.extend(vec![f64::NAN; 3]);
+        let h = histogram(&v, -0.02, 0.02, 8); // bins of 0.5 %
+        assert_eq!(h, vec![0, 30, 0, 0, 0, 60, 0, 7]);
+        assert_eq!(histogram(&[-1.0, 0.0], 0.0, 1.0, 2), vec![2, 0], "below the range: first bin");
+        assert_eq!(error_axis(&[&[0.004, -0.03]], 0.02), 0.05);
+        assert_eq!(error_axis(&[&[0.004], &[0.3]], 0.10), 0.5);
+        assert_eq!(error_axis(&[&[]], 0.10), 0.2);
+    }
+
+    #[test]
+    fn error_histogram_bars_have_the_heights_of_the_distribution() {
+        let dir = tempfile::tempdir().unwrap();
+        // vx: 75 % at −5.3 %, 25 % at +7.1 %; vz: all at +1.13 % (none on a bin edge).
+        let mut ex = vec![-0.053; 300];
+        ex.extend(vec![0.071; 100]);
+        let ez = vec![0.0113; 400];
+        let f = ErrorSample { name: "raw".into(), ex: &ex, ez: &ez };
+        let (fig, maps) = error_histograms_mapped(dir.path(), "errors", &[f]).unwrap();
+        assert_eq!(fig.path, "figures/error_histograms.png");
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        // vx axis: p99 of |e| 7.1 % < 1.5 × the 10 % criterion → ±20 %, bins of 1 %.
+        let rng = 20.0;
+        let w = 2.0 * rng / HIST_BINS as f64;
+        let top_of_bar = |m: &PanelMap, x: f64| {
+            let (cx, _) = m.pixel(x, 0.0);
+            let (_, y0) = m.pixel(x, 0.0);
+            // Scan upwards from the baseline while the pixel is the bar colour.
+            let mut y = y0 - 2.0;
+            while px(&img, (cx, y)) == BAR {
+                y -= 1.0;
+            }
+            y + 1.0
+        };
+        let bin_centre = |e: f64, r: f64, w: f64| -r + ((e + r) / w).floor() * w + 0.5 * w;
+        for (e, pct) in [(-5.3, 75.0), (7.1, 25.0)] {
+            let x = bin_centre(e, rng, w);
+            let (_, expect) = maps[0].pixel(x, pct);
+            let got = top_of_bar(&maps[0], x);
+            assert!((got - expect).abs() <= 2.0, "vx bar at {x} %: top at row {got}, expected {expect}");
+        }
+        // An empty bin has no bar.
+        let (cx, y0) = maps[0].pixel(bin_centre(0.0 + 2.0 * w, rng, w), 0.0);
+        assert_ne!(px(&img, (cx, y0 - 3.0)), BAR);
+        // vz axis: 1.5 × 2 % → ±5 %, one bar of 100 %.
+        let (rz, wz) = (5.0, 10.0 / HIST_BINS as f64);
+        let x = bin_centre(1.13, rz, wz);
+        let (_, expect) = maps[1].pixel(x, 100.0);
+        assert!((top_of_bar(&maps[1], x) - expect).abs() <= 2.0);
+    }
+
+    #[test]
+    fn doppler_map_colours_flow_inside_and_greys_low_power_outside() {
+        let dir = tempfile::tempdir().unwrap();
+        let n = 40;
+        let g = grid(n as u32);
+        let mask = disk(n);
+        let vn = 0.77;
+        // Inside: +½ Nyquist in the left half, −½ in the right half, power 1; outside: power
+        // 1e-3 (−30 dB: grey) and a velocity that would be yellow if shown.
+        let vel: Vec<f32> = (0..n * n)
+            .map(|i| {
+                if mask[i] > 0.5 {
+                    if i % n < 20 {
+                        0.5 * vn as f32
+                    } else {
+                        -0.5 * vn as f32
+                    }
+                } else {
+                    vn as f32
+                }
+            })
+            .collect();
+        let power: Vec<f32> = mask.iter().map(|m| if *m > 0.5 { 1.0 } else { 1e-3 }).collect();
+        let mut flags = vec![0.0f32; n * n];
+        flags[19 * n + 15] = 1.0; // no estimate inside: grey at 0 dB
+        let panels: Vec<DopplerPanel> = ["rx −15°", "rx +15°"]
+            .iter()
+            .map(|t| DopplerPanel {
+                title: t.to_string(),
+                grid: g,
+                velocity: &vel,
+                power: Some(&power),
+                flags: Some(&flags),
+                nyquist: vn,
+            })
+            .collect();
+        let (fig, maps) = doppler_maps_mapped(dir.path(), "Doppler", &panels, Some(&mask)).unwrap();
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        assert_eq!(maps.len(), 2);
+        for m in &maps {
+            assert_eq!(px(&img, m.pixel(cell(&g, 12, 19).0, cell(&g, 12, 19).1)), RGBColor(255, 0, 0));
+            assert_eq!(px(&img, m.pixel(cell(&g, 27, 19).0, cell(&g, 27, 19).1)), RGBColor(0, 0, 255));
+            assert_eq!(px(&img, m.pixel(cell(&g, 15, 19).0, cell(&g, 15, 19).1)), power_grey(0.0));
+            let out = px(&img, m.pixel(cell(&g, 2, 3).0, cell(&g, 2, 3).1));
+            assert_eq!(out, power_grey(-30.0), "outside the vessel: grey at −30 dB");
+        }
+        // The vessel outline is white, on the cell edge between inside and outside.
+        let (x_edge, z) = (cell(&g, 19, 9).0, cell(&g, 19, 9).1 + 0.25);
+        let p = maps[0].pixel(x_edge, z);
+        let near: Vec<RGBColor> = (-1..=1).map(|d| px(&img, (p.0, p.1 + d as f64))).collect();
+        assert!(near.contains(&WHITE), "{near:?}");
+    }
+
+    #[test]
+    fn vector_field_colours_the_true_speed_inside_and_draws_arrows() {
+        let dir = tempfile::tempdir().unwrap();
+        let n = 40;
+        let g = grid(n as u32);
+        let mask = disk(n);
+        // Solid-body rotation inside the disk, zero outside.
+        let (mut tvx, mut tvz) = (vec![0.0f32; n * n], vec![0.0f32; n * n]);
+        for i in 0..n * n {
+            if mask[i] > 0.5 {
+                let (x, z) = ((i % n) as f32 - 19.5, (i / n) as f32 - 19.5);
+                tvx[i] = -0.05 * z;
+                tvz[i] = 0.05 * x;
+            }
+        }
+        let zero = vec![0.0f32; n * n];
+        let panels = [
+            VectorPanel { name: "zero estimate".into(), vx: &zero, vz: &zero, flags: None },
+            VectorPanel { name: "exact".into(), vx: &tvx, vz: &tvz, flags: None },
+        ];
+        let (fig, maps) = vector_field_mapped(dir.path(), "vectors", &g, (&tvx, &tvz, &mask), &panels).unwrap();
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        let speed = |i: usize| (tvx[i] as f64).hypot(tvz[i] as f64);
+        let v_max = (0..n * n).filter(|i| mask[*i] > 0.5).map(speed).fold(0.0, f64::max);
+        // Zero estimate: no arrows, the cells show the colour map.
+        for (ix, iz) in [(19, 19), (25, 14), (12, 26), (28, 20)] {
+            let i = iz * n + ix;
+            let c = cell(&g, ix, iz);
+            let want = speed_colour(speed(i) / v_max);
+            assert_eq!(px(&img, maps[0].pixel(c.0, c.1)), want, "cell ({ix}, {iz})");
+        }
+        let c = cell(&g, 1, 1);
+        assert_eq!(px(&img, maps[0].pixel(c.0, c.1)), OUTSIDE);
+        // Exact estimate: an arrow from the sampled cell (step 3 → cells 1, 4, …; cell (28, 19)
+        // moves +z): a dark grey (anti-aliased black) pixel on its shaft one cell below the tail,
+        // where the colour map has no grey.
+        let step = arrow_step(n, n);
+        assert_eq!(step, 3);
+        let (ix, iz) = (28, 19);
+        assert_eq!((ix % step, iz % step), (step / 2, step / 2));
+        let dark = |c: &RGBColor| c.0 == c.1 && c.1 == c.2 && c.0 < 160;
+        let tail = cell(&g, ix, iz);
+        let shaft = maps[1].pixel(tail.0, tail.1 + g.dz * 1e3);
+        let around: Vec<RGBColor> = (-1..=1).map(|d| px(&img, (shaft.0 + d as f64, shaft.1))).collect();
+        assert!(around.iter().any(dark), "{around:?}");
+        // … and none in the zero panel at the same place.
+        let shaft0 = maps[0].pixel(tail.0, tail.1 + g.dz * 1e3);
+        let around0: Vec<RGBColor> = (-1..=1).map(|d| px(&img, (shaft0.0 + d as f64, shaft0.1))).collect();
+        assert!(!around0.iter().any(dark), "{around0:?}");
+    }
+
+    #[test]
+    fn stage_chart_has_one_bar_pair_per_node_of_the_right_length() {
+        let dir = tempfile::tempdir().unwrap();
+        let rows: Vec<StageRow> =
+            [("flow", 0.2, 1.0), ("simus", 1.5, 2.0), ("beamformer", 0.8, 2.1), ("doppler", 0.05, 2.2)]
+                .iter()
+                .map(|(n, c, w)| StageRow { name: n.to_string(), compute_s: Some(*c), wall_s: Some(*w) })
+                .chain(std::iter::once(StageRow { name: "external".into(), compute_s: None, wall_s: None }))
+                .collect();
+        let (fig, maps) = stage_times_mapped(dir.path(), "stages", &rows).unwrap();
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        let m = maps[0];
+        // Bands of the compute colour down a column near the axis: one per node with stats.
+        let (x, _) = m.pixel(0.02, 0.0);
+        let mut bands = [0usize; 2];
+        let mut prev = [false; 2];
+        for y in 0..img.1 {
+            let c = px(&img, (x, y as f64));
+            for (k, col) in [BAR, BAR2].iter().enumerate() {
+                let on = c == *col;
+                if on && !prev[k] {
+                    bands[k] += 1;
+                }
+                prev[k] = on;
+            }
+        }
+        assert_eq!(bands, [4, 4], "compute and wall bands (the legend's swatches are further right)");
+        let n = rows.len() as f64;
+        for (k, r) in rows.iter().enumerate().take(4) {
+            let yc = n - k as f64 - 0.5;
+            let (c, w) = (r.compute_s.unwrap(), r.wall_s.unwrap());
+            assert_eq!(px(&img, m.pixel(c - 0.03, yc + 0.2)), BAR, "{}", r.name);
+            assert_ne!(px(&img, m.pixel(c + 0.03, yc + 0.2)), BAR, "{}", r.name);
+            assert_eq!(px(&img, m.pixel(w - 0.03, yc - 0.2)), BAR2, "{}", r.name);
+            assert_ne!(px(&img, m.pixel(w + 0.03, yc - 0.2)), BAR2, "{}", r.name);
+        }
+        // The node without statistics has no bar.
+        assert_ne!(px(&img, m.pixel(0.02, 0.5 + 0.2)), BAR);
+    }
+
+    #[test]
+    fn bad_input_is_an_error_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = grid(10);
+        let short = vec![0.0f32; 50];
+        let e = vector_field(dir.path(), "v", &g, (&short, &short, &short), &[]).unwrap_err();
+        assert!(e.to_string().contains("50 values for a 10 × 10 grid"), "{e}");
+        let e = doppler_maps(dir.path(), "d", &[], None).unwrap_err();
+        assert!(e.to_string().contains("no Doppler maps"));
+        assert!(error_histograms(dir.path(), "e", &[]).is_err());
+        assert!(stage_times(dir.path(), "s", &[]).is_err());
+        let w = guarded("boom", || -> anyhow::Result<()> { panic!("kaboom") }).unwrap_err();
+        assert!(w.contains("figure boom") && w.contains("kaboom"), "{w}");
+        assert!(!dir.path().join(DIR).join(VECTORS).exists());
+    }
+}
