@@ -134,11 +134,12 @@ fn figure(name: &str, title: String, caption: String, (width, height): (u32, u32
 // ---------------------------------------------------------------------------------------------
 // Colour maps
 
-/// Colour Doppler map of `t = v / v_Nyquist`: black at 0, red (t = ½) to yellow (t ≥ 1) toward
-/// the probe, blue (t = −½) to cyan (t ≤ −1) away from it.
+/// Colour Doppler map of `t = v / v_Nyquist`: black at 0, red (t = ¼) to yellow (t ≥ 1) toward
+/// the probe, blue (t = −¼) to cyan (t ≤ −1) away from it (brightness ∝ √|t|, so that slow flow
+/// shows).
 pub fn doppler_colour(t: f64) -> RGBColor {
     let t = if t.is_finite() { t.clamp(-1.0, 1.0) } else { 0.0 };
-    let a = t.abs();
+    let a = t.abs().sqrt();
     let main = (510.0 * a.min(0.5)).round() as u8;
     let hi = (510.0 * (a - 0.5).max(0.0)).round() as u8;
     if t >= 0.0 {
@@ -704,8 +705,13 @@ fn error_histograms_mapped(
                     100.0 * st.abs_p75
                 );
                 let pos = c.backend_coord(&(-100.0 * rng, ymax));
-                root.draw(&Text::new(text, (pos.0 + 6, pos.1 + 4), (FAMILY, 12).into_font().color(&BLACK)))
+                let font = (FAMILY, 12).into_font().color(&BLACK);
+                let (tw, _) = root.estimate_text_size(&text, &font).map_err(de)?;
+                // ab_glyph puts the baseline half a font size below the text position.
+                let (x0, ty) = (pos.0 + 4, pos.1 + 7);
+                root.draw(&Rectangle::new([(x0, ty - 6), (x0 + tw as i32 + 8, ty + 12)], WHITE.filled()))
                     .map_err(de)?;
+                root.draw(&Text::new(text, (x0 + 4, ty), font)).map_err(de)?;
                 maps.push(PanelMap::of(&c));
             }
         }
@@ -782,15 +788,18 @@ fn stage_times_mapped(dir: &Path, heading: &str, rows: &[StageRow]) -> anyhow::R
         c.draw_series(rows.iter().enumerate().filter_map(|(k, r)| {
             ok(r.compute_s).map(|v| Rectangle::new([(0.0, yc(k) + 0.04), (v, yc(k) + 0.38)], BAR.filled()))
         }))
-        .map_err(de)?
-        .label("compute CPU")
-        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], BAR.filled()));
+        .map_err(de)?;
         c.draw_series(rows.iter().enumerate().filter_map(|(k, r)| {
             ok(r.wall_s).map(|v| Rectangle::new([(0.0, yc(k) - 0.38), (v, yc(k) - 0.04)], BAR2.filled()))
         }))
-        .map_err(de)?
-        .label("wall (process)")
-        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], BAR2.filled()));
+        .map_err(de)?;
+        // Legend, right of the title.
+        let lx = size.0 as i32 - 330;
+        for (k, (col, text)) in [(BAR, "compute CPU"), (BAR2, "wall (process)")].into_iter().enumerate() {
+            let x = lx + 150 * k as i32;
+            root.draw(&Rectangle::new([(x, 12), (x + 14, 24)], col.filled())).map_err(de)?;
+            root.draw(&Text::new(text, (x + 20, 11), (FAMILY, 13).into_font().color(&BLACK))).map_err(de)?;
+        }
         let name_style = (FAMILY, 13).into_font().color(&BLACK).pos(plotters::style::text_anchor::Pos::new(
             plotters::style::text_anchor::HPos::Right,
             plotters::style::text_anchor::VPos::Center,
@@ -815,13 +824,6 @@ fn stage_times_mapped(dir: &Path, heading: &str, rows: &[StageRow]) -> anyhow::R
                 }
             }
         }
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.9))
-            .border_style(RGBColor(180, 180, 180))
-            .label_font((FAMILY, 12))
-            .draw()
-            .map_err(de)?;
         // x in seconds, y in row units (row k centred at n − k − 0.5).
         Ok(vec![PanelMap::of(&c)])
     })?;
@@ -881,10 +883,11 @@ mod tests {
     #[test]
     fn colour_maps_have_the_documented_ends() {
         assert_eq!(doppler_colour(0.0), RGBColor(0, 0, 0));
-        assert_eq!(doppler_colour(0.5), RGBColor(255, 0, 0));
+        assert_eq!(doppler_colour(0.25), RGBColor(255, 0, 0));
+        assert_eq!(doppler_colour(0.0625), RGBColor(128, 0, 0));
         assert_eq!(doppler_colour(1.0), RGBColor(255, 255, 0));
         assert_eq!(doppler_colour(3.0), RGBColor(255, 255, 0));
-        assert_eq!(doppler_colour(-0.5), RGBColor(0, 0, 255));
+        assert_eq!(doppler_colour(-0.25), RGBColor(0, 0, 255));
         assert_eq!(doppler_colour(-1.0), RGBColor(0, 255, 255));
         assert_eq!(doppler_colour(f64::NAN), RGBColor(0, 0, 0));
         assert_eq!(power_grey(0.0), RGBColor(200, 200, 200));
@@ -962,15 +965,15 @@ mod tests {
         let g = grid(n as u32);
         let mask = disk(n);
         let vn = 0.77;
-        // Inside: +½ Nyquist in the left half, −½ in the right half, power 1; outside: power
+        // Inside: +¼ Nyquist in the left half, −¼ in the right half, power 1; outside: power
         // 1e-3 (−30 dB: grey) and a velocity that would be yellow if shown.
         let vel: Vec<f32> = (0..n * n)
             .map(|i| {
                 if mask[i] > 0.5 {
                     if i % n < 20 {
-                        0.5 * vn as f32
+                        0.25 * vn as f32
                     } else {
-                        -0.5 * vn as f32
+                        -0.25 * vn as f32
                     }
                 } else {
                     vn as f32
@@ -1088,7 +1091,10 @@ mod tests {
                 prev[k] = on;
             }
         }
-        assert_eq!(bands, [4, 4], "compute and wall bands (the legend's swatches are further right)");
+        assert_eq!(bands, [4, 4], "compute and wall bands (the legend's swatches are in the title row)");
+        // The legend's swatches, in the title row.
+        let legend: Vec<RGBColor> = (0..img.0).map(|x| px(&img, (x as f64, 18.0))).collect();
+        assert!(legend.contains(&BAR) && legend.contains(&BAR2));
         let n = rows.len() as f64;
         for (k, r) in rows.iter().enumerate().take(4) {
             let yc = n - k as f64 - 0.5;

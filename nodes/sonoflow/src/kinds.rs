@@ -140,11 +140,12 @@ static KINDS: &[KindSpec] = &[
     },
     KindSpec {
         name: "evaluator",
-        about: "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md and the run report",
+        about: "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md, the run report and its figures (with `maps`: colour Doppler)",
         ports: &[
             port("truth", In, VectorFieldV1, true),
             port("raw", In, VectorFieldV1, false),
             port("regularised", In, VectorFieldV1, false),
+            port("maps", In, DopplerMapV1, false),
         ],
         dynamic_inputs: false,
         dynamic_outputs: false,

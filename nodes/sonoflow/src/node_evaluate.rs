@@ -1,16 +1,22 @@
 //! `evaluator` node: ground truth vs estimated vector fields, per packet (paper 1's error measure,
 //! [`crate::evaluate`]). Inputs: `truth` (required; planes vx, vz, mask) and any of `raw` and
-//! `regularised` (planes vx, vz, optional flags), matched by packet number. At the end it writes
+//! `regularised` (planes vx, vz, optional flags), matched by packet number, and optionally
+//! `maps` (the Doppler node's colour Doppler maps, for the figures). At the end it writes
 //! `evaluation.json` and `evaluation.md` into the run folder (the launcher puts the latter into
-//! `report.md`, beside the stage times) and prints one line per field.
+//! `report.md`, beside the stage times), prints one line per field and, unless
+//! `figures = false`, draws the report's figures into `<run>/figures/` ([`crate::figures`]):
+//! the colour Doppler maps and the vectors over the true speed of the last evaluated packet, and
+//! the error histograms pooled over all packets. A figure that cannot be drawn is a warning in
+//! `evaluation.json`, never an error of the node.
 
-use crate::evaluate::{field_error, FieldError};
+use crate::evaluate::{field_error_samples, FieldError};
+use crate::figures::{self, Figure};
 use crate::kinds::parse;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use serde::{Deserialize, Serialize};
-use sonoflow_messages::kinds::VectorField;
-use sonoflow_messages::{plane, VectorFieldHeaderV1};
+use sonoflow_messages::kinds::{DopplerMap, VectorField};
+use sonoflow_messages::{plane, DopplerMapHeaderV1, VectorFieldHeaderV1};
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Input, Kit};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -22,11 +28,13 @@ use std::time::Duration;
 pub struct EvaluatorParams {
     /// Pixels count when the truth mask covers their whole (2·margin+1)² neighbourhood (0 ..= 10).
     pub margin: usize,
+    /// Draw the report's figures into `<run>/figures/` at the end (default true).
+    pub figures: bool,
 }
 
 impl Default for EvaluatorParams {
     fn default() -> Self {
-        Self { margin: 2 }
+        Self { margin: 2, figures: true }
     }
 }
 
@@ -49,9 +57,16 @@ pub struct PacketEval {
 pub struct Evaluation {
     pub margin: usize,
     pub packets: Vec<PacketEval>,
+    /// Figures written into `<run>/figures/` (paths relative to the run folder).
+    #[serde(default)]
+    pub figures: Vec<Figure>,
+    /// Figures that could not be drawn, and why.
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 type Field = (VectorFieldHeaderV1, Vec<f32>);
+type Map = (DopplerMapHeaderV1, Vec<f32>);
 
 fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
     let n = h.grid.nx as usize * h.grid.nz as usize;
@@ -62,6 +77,15 @@ fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a
 
 /// Errors of `est` against `truth` (same grid required).
 pub fn evaluate_pair(truth: &Field, est: &Field, margin: usize) -> anyhow::Result<FieldError> {
+    evaluate_pair_samples(truth, est, margin).map(|r| r.0)
+}
+
+/// [`evaluate_pair`] with the per-pixel errors `(e_x, e_z)` (for the histograms).
+pub fn evaluate_pair_samples(
+    truth: &Field,
+    est: &Field,
+    margin: usize,
+) -> anyhow::Result<(FieldError, Vec<f64>, Vec<f64>)> {
     let (th, tv) = truth;
     let (eh, ev) = est;
     if th.grid != eh.grid {
@@ -76,7 +100,127 @@ pub fn evaluate_pair(truth: &Field, est: &Field, margin: usize) -> anyhow::Resul
         (need(th, tv, plane::VX, "truth")?, need(th, tv, plane::VZ, "truth")?, need(th, tv, plane::MASK, "truth")?);
     let (vx, vz) = (need(eh, ev, plane::VX, "estimated")?, need(eh, ev, plane::VZ, "estimated")?);
     let flags = plane_of(eh, ev, plane::FLAGS);
-    Ok(field_error((&tvx, &tvz, &mask), (&vx, &vz, flags), th.grid.nx as usize, th.grid.nz as usize, margin))
+    Ok(field_error_samples((&tvx, &tvz, &mask), (&vx, &vz, flags), th.grid.nx as usize, th.grid.nz as usize, margin))
+}
+
+/// What the evaluator keeps for its figures.
+#[derive(Default)]
+pub struct FigureData {
+    /// Per field, the errors pooled over all evaluated packets.
+    pub samples: BTreeMap<String, (Vec<f64>, Vec<f64>)>,
+    /// Packet evaluated last (the highest number), its truth and estimates.
+    pub last: Option<(u32, Field, BTreeMap<String, Field>)>,
+    /// Colour Doppler maps by packet (the most recent few).
+    pub maps: BTreeMap<u32, Vec<Map>>,
+}
+
+impl FigureData {
+    fn keep_estimate(&mut self, packet: u32, truth: &Field, name: &str, est: Field) {
+        match &mut self.last {
+            Some((p, _, fields)) if *p == packet => {
+                fields.insert(name.to_string(), est);
+            }
+            Some((p, _, _)) if *p > packet => {}
+            _ => self.last = Some((packet, truth.clone(), BTreeMap::from([(name.to_string(), est)]))),
+        }
+    }
+
+    fn keep_map(&mut self, m: Map) {
+        self.maps.entry(m.0.packet).or_default().push(m);
+        while self.maps.len() > 4 {
+            self.maps.pop_first();
+        }
+    }
+}
+
+/// Draws the evaluator's figures into `dir/figures/`: (figures written, warnings).
+pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize) -> (Vec<Figure>, Vec<String>) {
+    let (mut figs, mut warns) = (Vec::new(), Vec::new());
+    let mut keep = |r: Result<Figure, String>| match r {
+        Ok(f) => figs.push(f),
+        Err(w) => warns.push(w),
+    };
+    let last = data.last.as_ref();
+    // Colour Doppler maps: the last evaluated packet's, else the latest received.
+    let maps = last.and_then(|(p, _, _)| data.maps.get_key_value(p)).or_else(|| data.maps.last_key_value());
+    if let Some((packet, maps)) = maps {
+        keep(figures::guarded("doppler maps", || {
+            let mut maps: Vec<&Map> = maps.iter().collect();
+            maps.sort_by(|a, b| {
+                (a.0.tx_angle, a.0.rx_angle)
+                    .partial_cmp(&(b.0.tx_angle, b.0.rx_angle))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            });
+            let panels: Vec<figures::DopplerPanel> = maps
+                .iter()
+                .map(|(h, d)| {
+                    let n = h.grid.nx as usize * h.grid.nz as usize;
+                    let np = (h.n_planes as usize).min(h.plane_ids.len());
+                    let plane = |id: u32| {
+                        h.plane_ids[..np].iter().position(|&p| p == id).and_then(|k| d.get(k * n..(k + 1) * n))
+                    };
+                    let velocity = plane(plane::VELOCITY)
+                        .ok_or_else(|| anyhow::anyhow!("map of packet {} has no `velocity` plane", h.packet))?;
+                    Ok(figures::DopplerPanel {
+                        title: format!("tx {:.0}°, rx {:+.0}°", h.tx_angle.to_degrees(), h.rx_angle.to_degrees())
+                            .replace('-', "−"),
+                        grid: h.grid,
+                        velocity,
+                        power: plane(plane::POWER),
+                        flags: plane(plane::FLAGS),
+                        nyquist: h.nyquist_velocity,
+                    })
+                })
+                .collect::<anyhow::Result<_>>()?;
+            // The vessel outline when the truth of that packet is on the maps' grid.
+            let outline = last
+                .filter(|(p, t, _)| p == packet && maps.first().is_some_and(|m| m.0.grid == t.0.grid))
+                .and_then(|(_, t, _)| plane_of(&t.0, &t.1, plane::MASK));
+            figures::doppler_maps(dir, &format!("Colour Doppler, packet {packet}"), &panels, outline)
+        }));
+    }
+    if let Some((packet, truth, fields)) = last {
+        keep(figures::guarded("vector field", || {
+            let (th, tv) = truth;
+            let need = |id: u32| {
+                plane_of(th, tv, id).ok_or_else(|| anyhow::anyhow!("truth has no `{}` plane", plane::name(id)))
+            };
+            let (tvx, tvz, mask) = (need(plane::VX)?, need(plane::VZ)?, need(plane::MASK)?);
+            let mut panels = Vec::new();
+            for (name, (h, d)) in fields {
+                if h.grid != th.grid {
+                    continue;
+                }
+                if let (Some(vx), Some(vz)) = (plane_of(h, d, plane::VX), plane_of(h, d, plane::VZ)) {
+                    panels.push(figures::VectorPanel {
+                        name: name.clone(),
+                        vx,
+                        vz,
+                        flags: plane_of(h, d, plane::FLAGS),
+                    });
+                }
+            }
+            figures::vector_field(
+                dir,
+                &format!("Estimated vectors over the true speed, packet {packet} (t = {:.4} s)", th.common.t_valid),
+                &th.grid,
+                (tvx, tvz, mask),
+                &panels,
+            )
+        }));
+    }
+    if !data.samples.is_empty() {
+        keep(figures::guarded("error histograms", || {
+            let fields: Vec<figures::ErrorSample> = data
+                .samples
+                .iter()
+                .map(|(name, (ex, ez))| figures::ErrorSample { name: name.clone(), ex, ez })
+                .collect();
+            let pooled = if n_packets == 1 { "1 packet".to_string() } else { format!("{n_packets} packets pooled") };
+            figures::error_histograms(dir, &format!("Errors against ground truth ({pooled})"), &fields)
+        }));
+    }
+    (figs, warns)
 }
 
 /// Markdown table of an evaluation (also used by the report).
@@ -125,28 +269,52 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     if est_in.is_empty() {
         anyhow::bail!("evaluator: connect at least one of the inputs `raw` and `regularised`");
     }
+    let mut maps_in = match kit.cfg.inputs.contains_key("maps") {
+        true => Some(kit.input::<DopplerMap>("maps")?),
+        false => None,
+    };
     {
         let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> = vec![&mut truth_in];
         for (_, i) in est_in.iter_mut() {
             hs.push(i);
         }
+        if let Some(m) = maps_in.as_mut() {
+            hs.push(m);
+        }
         kit.handshake(&mut hs)?;
     }
     let waitset =
         WaitSetBuilder::new().create::<ipc::Service>().map_err(|e| anyhow::anyhow!("creating the WaitSet: {e:?}"))?;
-    let listeners: Vec<_> =
-        std::iter::once(truth_in.listener()).chain(est_in.iter().map(|(_, i)| i.listener())).collect();
+    let listeners: Vec<_> = std::iter::once(truth_in.listener())
+        .chain(est_in.iter().map(|(_, i)| i.listener()))
+        .chain(maps_in.iter().map(|m| m.listener()))
+        .collect();
     let mut guards = Vec::new();
     for l in &listeners {
         guards.push(waitset.attach_notification(l.as_ref()).map_err(|e| anyhow::anyhow!("WaitSet attach: {e:?}"))?);
     }
     let mut truths: BTreeMap<u32, Field> = BTreeMap::new();
     let mut estimates: BTreeMap<(u32, String), Field> = BTreeMap::new();
-    let mut eval = Evaluation { margin: p.margin, packets: Vec::new() };
+    let mut eval = Evaluation { margin: p.margin, ..Default::default() };
     let mut done: BTreeMap<u32, PacketEval> = BTreeMap::new();
+    let mut fig = FigureData::default();
     let mut truth_eos = false;
     let mut est_eos = vec![false; est_in.len()];
+    let mut maps_eos = maps_in.is_none();
     loop {
+        if let Some(m) = maps_in.as_mut() {
+            while let Some(s) = m.try_receive()? {
+                let h = *s.user_header();
+                if is_eos::<DopplerMap>(&h) {
+                    maps_eos = true;
+                    break;
+                }
+                kit.stats.messages_in += 1;
+                if p.figures {
+                    fig.keep_map((h, s.payload().to_vec()));
+                }
+            }
+        }
         while let Some(s) = truth_in.try_receive()? {
             let h = *s.user_header();
             if is_eos::<VectorField>(&h) {
@@ -173,7 +341,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let t0 = thread_cpu_ns();
             let Some(est) = estimates.remove(&key) else { continue };
             let Some(truth) = truths.get(&key.0) else { continue };
-            let fe = evaluate_pair(truth, &est, p.margin)?;
+            let (fe, ex, ez) = evaluate_pair_samples(truth, &est, p.margin)?;
             println!(
                 "evaluator: packet {} {}: x bias {:+.1} %, |e|75 {:.1} %; z bias {:+.1} %, |e|75 {:.1} % of v_max {:.3} m/s ({} px)",
                 key.0,
@@ -191,9 +359,15 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 fields: BTreeMap::new(),
             });
             entry.fields.insert(key.1.clone(), fe);
+            if p.figures {
+                let pooled = fig.samples.entry(key.1.clone()).or_default();
+                pooled.0.extend(ex);
+                pooled.1.extend(ez);
+                fig.keep_estimate(key.0, truth, &key.1, est);
+            }
             kit.record(truth.0.common.frame_id, truth.0.common.t_valid, thread_cpu_ns() - t0)?;
         }
-        if truth_eos && est_eos.iter().all(|e| *e) {
+        if truth_eos && est_eos.iter().all(|e| *e) && maps_eos {
             break;
         }
         match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, Duration::from_millis(500))
@@ -216,10 +390,83 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     eval.packets = done.into_values().collect();
     if let Some(dir) = &kit.cfg.out_dir {
         let dir = std::path::Path::new(dir);
+        if p.figures {
+            let t0 = std::time::Instant::now();
+            (eval.figures, eval.warnings) = write_figures(dir, &fig, eval.packets.len());
+            for w in &eval.warnings {
+                eprintln!("evaluator: warning: {w}");
+            }
+            println!(
+                "evaluator: {} figure(s) in {}/ ({:.0} ms)",
+                eval.figures.len(),
+                figures::DIR,
+                1e3 * t0.elapsed().as_secs_f64()
+            );
+        }
         crate::nodeutil::write_atomic(&dir.join("evaluation.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
         crate::nodeutil::write_atomic(&dir.join("evaluation.md"), markdown(&eval).as_bytes())?;
     }
-    kit.stats.gaps = truth_in.gaps + est_in.iter().map(|(_, i)| i.gaps).sum::<u64>();
+    kit.stats.gaps =
+        truth_in.gaps + est_in.iter().map(|(_, i)| i.gaps).sum::<u64>() + maps_in.as_ref().map(|m| m.gaps).unwrap_or(0);
     kit.finish()?;
     Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use sonoflow_messages::GridV1;
+
+    fn field(grid: GridV1, packet: u32, planes: &[(u32, Vec<f32>)]) -> Field {
+        let mut h = VectorFieldHeaderV1 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
+        for (k, (id, _)) in planes.iter().enumerate() {
+            h.plane_ids[k] = *id;
+        }
+        (h, planes.iter().flat_map(|(_, d)| d.iter().copied()).collect())
+    }
+
+    #[test]
+    fn figures_of_the_last_packet_and_a_bad_map_is_a_warning() {
+        let dir = tempfile::tempdir().unwrap();
+        let grid = GridV1 { x0: -0.005, z0: 0.01, dx: 0.25e-3, dz: 0.25e-3, nx: 41, nz: 41 };
+        let n = 41 * 41;
+        let mask: Vec<f32> = (0..n).map(|i: usize| if (i / 41).abs_diff(20) < 8 { 1.0 } else { 0.0 }).collect();
+        let vx: Vec<f32> = mask.iter().map(|m| 0.4 * m).collect();
+        let zero = vec![0.0f32; n];
+        let truth = field(grid, 3, &[(plane::VX, vx.clone()), (plane::VZ, zero.clone()), (plane::MASK, mask)]);
+        let noisy: Vec<f32> = vx.iter().enumerate().map(|(i, v)| v + 0.02 * ((i % 7) as f32 - 3.0)).collect();
+        let mut fig = FigureData::default();
+        for (packet, name, est) in [(2, "raw", &noisy), (3, "raw", &noisy), (3, "regularised", &vx), (1, "raw", &vx)] {
+            let e = field(grid, packet, &[(plane::VX, est.clone()), (plane::VZ, zero.clone())]);
+            let (_, ex, ez) = evaluate_pair_samples(&truth, &e, 2).unwrap();
+            let s = fig.samples.entry(name.to_string()).or_default();
+            s.0.extend(ex);
+            s.1.extend(ez);
+            fig.keep_estimate(packet, &truth, name, e);
+        }
+        // Kept: packet 3 with both fields (packet 1 arrived late and is older).
+        let (p, _, fields) = fig.last.as_ref().unwrap();
+        assert_eq!(
+            (*p, fields.keys().cloned().collect::<Vec<_>>()),
+            (3, vec!["raw".to_string(), "regularised".into()])
+        );
+        // A map without a velocity plane: the Doppler figure fails, the others are drawn.
+        let mut mh = DopplerMapHeaderV1 { grid, packet: 3, n_planes: 1, nyquist_velocity: 0.77, ..Default::default() };
+        mh.plane_ids[0] = plane::POWER;
+        fig.keep_map((mh, vec![1.0; n]));
+        let (figs, warns) = write_figures(dir.path(), &fig, 3);
+        let paths: Vec<&str> = figs.iter().map(|f| f.path.as_str()).collect();
+        assert_eq!(paths, ["figures/vector_field.png", "figures/error_histograms.png"]);
+        assert!(figs[1].title.contains("3 packets pooled"), "{}", figs[1].title);
+        assert_eq!(warns.len(), 1);
+        assert!(warns[0].contains("figure doppler maps") && warns[0].contains("no `velocity` plane"), "{warns:?}");
+        assert!(dir.path().join("figures/vector_field.png").is_file());
+        assert!(!dir.path().join("figures/doppler_maps.png").exists());
+        // Maps of more than 4 packets: the oldest are dropped.
+        for p in 4..10 {
+            fig.keep_map((DopplerMapHeaderV1 { packet: p, ..Default::default() }, Vec::new()));
+        }
+        assert_eq!(fig.maps.keys().copied().collect::<Vec<_>>(), [6, 7, 8, 9]);
+    }
 }

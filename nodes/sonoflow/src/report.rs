@@ -1,10 +1,45 @@
 //! The run report: `report.json` (machine-readable) and `report.md` (human), written at the end
 //! of every run; with an `evaluator` node in the graph, report.md also holds the errors against
-//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it).
+//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it). Figures
+//! (`figures/*.png`): the stage times always, drawn here; the evaluator's (colour Doppler, vectors,
+//! error histograms) listed in its `evaluation.json`. report.md shows each with a caption.
 
 use crate::run::RunReport;
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// The stage-time chart's rows: every node, compute CPU and wall time in seconds.
+pub fn stage_rows(r: &RunReport) -> Vec<crate::figures::StageRow> {
+    r.nodes
+        .iter()
+        .map(|n| crate::figures::StageRow {
+            name: n.name.clone(),
+            compute_s: n.stats.as_ref().map(|s| s.compute_ns_total as f64 / 1e9),
+            wall_s: n.stats.as_ref().map(|s| s.wall_ns as f64 / 1e9),
+        })
+        .collect()
+}
+
+/// Draws the stage-time chart into `dir/figures/` and collects the evaluator's figures from
+/// `dir/evaluation.json` into `r.figures`; every problem becomes a warning of the report.
+pub fn add_figures(dir: &Path, r: &mut RunReport) {
+    let heading = format!("Stage times — {} ({}, {:.2} s)", r.graph, r.status, r.wall_s);
+    let rows = stage_rows(r);
+    match crate::figures::guarded("stage times", || crate::figures::stage_times(dir, &heading, &rows)) {
+        Ok(f) => r.figures.push(f),
+        Err(w) => r.warnings.push(w),
+    }
+    let path = dir.join("evaluation.json");
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        match serde_json::from_str::<crate::node_evaluate::Evaluation>(&text) {
+            Ok(e) => {
+                r.figures.extend(e.figures.into_iter().filter(|f| dir.join(&f.path).is_file()));
+                r.warnings.extend(e.warnings);
+            }
+            Err(e) => r.warnings.push(format!("{}: {e}: its figures are not listed", path.display())),
+        }
+    }
+}
 
 /// Writes `report.json` and `report.md` into `dir` (atomically).
 pub fn write(dir: &Path, r: &RunReport) -> anyhow::Result<()> {
@@ -15,8 +50,23 @@ pub fn write(dir: &Path, r: &RunReport) -> anyhow::Result<()> {
         md.push('\n');
         md.push_str(&e);
     }
+    md.push_str(&figures_markdown(&r.figures));
     crate::nodeutil::write_atomic(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
+}
+
+/// The figures section of report.md: each figure linked, with its caption.
+pub fn figures_markdown(figs: &[crate::figures::Figure]) -> String {
+    let mut s = String::new();
+    if figs.is_empty() {
+        return s;
+    }
+    let _ = writeln!(s, "\n## Figures\n");
+    for f in figs {
+        let _ = writeln!(s, "![{}]({})\n", f.title, f.path);
+        let _ = writeln!(s, "*{}* {}\n", f.title, f.caption);
+    }
+    s
 }
 
 /// Human-readable report.

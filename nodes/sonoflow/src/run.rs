@@ -60,6 +60,9 @@ pub struct RunReport {
     pub recordings: Vec<String>,
     pub shm_bytes: u64,
     pub nodes: Vec<NodeOutcome>,
+    /// PNG figures in `figures/` (paths relative to the run folder): the stage times, and the
+    /// evaluator's when the graph has one. A figure that could not be drawn is a warning.
+    pub figures: Vec<crate::figures::Figure>,
 }
 
 struct Running {
@@ -365,7 +368,7 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
     } else {
         "ok"
     };
-    let report = RunReport {
+    let mut report = RunReport {
         graph: graph.graph.name.clone(),
         run_id: opts.run_id.clone(),
         out_dir: out_dir.display().to_string(),
@@ -386,7 +389,9 @@ pub fn run(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32> {
                 log: p.log_path.display().to_string(),
             })
             .collect(),
+        figures: Vec::new(),
     };
+    crate::report::add_figures(&out_dir, &mut report);
     crate::report::write(&out_dir, &report)?;
     for r in &report.recordings {
         println!("recording: {r}");

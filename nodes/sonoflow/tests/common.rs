@@ -126,3 +126,30 @@ pub fn kill9(pid: i32) {
         libc::kill(pid, libc::SIGKILL);
     }
 }
+
+/// The figures `report.json` lists: each file exists under the run folder, decodes as a PNG of
+/// the stated size, and report.md links it with its caption. Returns the file names.
+pub fn checked_figures(run: &Path) -> Vec<String> {
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(run.join("report.json")).unwrap()).unwrap();
+    let md = std::fs::read_to_string(run.join("report.md")).unwrap();
+    let mut names = Vec::new();
+    for f in report["figures"].as_array().expect("report.json lists figures") {
+        let path = f["path"].as_str().unwrap();
+        let dec = png::Decoder::new(std::fs::File::open(run.join(path)).unwrap_or_else(|e| panic!("{path}: {e}")));
+        let mut rd = dec.read_info().unwrap();
+        let mut buf = vec![0; rd.output_buffer_size()];
+        let info = rd.next_frame(&mut buf).unwrap();
+        assert_eq!(
+            (u64::from(info.width), u64::from(info.height)),
+            (f["width"].as_u64().unwrap(), f["height"].as_u64().unwrap()),
+            "{path}"
+        );
+        assert!(info.width >= 300 && info.height >= 200, "{path}: {}×{}", info.width, info.height);
+        // Not a blank canvas: the figure has drawn pixels.
+        assert!(buf[..info.buffer_size()].iter().any(|b| *b < 128), "{path} is blank");
+        assert!(md.contains(&format!("]({path})")), "report.md links {path}");
+        assert!(md.contains(f["caption"].as_str().unwrap()), "report.md has the caption of {path}");
+        names.push(path.trim_start_matches("figures/").to_string());
+    }
+    names
+}

@@ -55,6 +55,8 @@ fn four_mib_frames_through_three_processes_and_an_external_node() {
         serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["status"], "ok");
     assert_eq!(report["nodes"].as_array().unwrap().len(), 4);
+    // No evaluator: the stage-time chart is the only figure.
+    assert_eq!(checked_figures(dir.path()), ["stage_times.png"]);
 }
 
 /// Record a run, replay its `rf` into the same downstream stage: the downstream output is
@@ -437,6 +439,17 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         }
         let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
         assert!(report.contains("## Error against ground truth") && report.contains("| 0 | regularised |"), "{report}");
+        // The figures: stage times (launcher), colour Doppler maps of both receive angles,
+        // vectors of both fields over the truth, error histograms (evaluator), all in report.md.
+        let mut figs = checked_figures(dir.path());
+        figs.sort();
+        assert_eq!(figs, ["doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]);
+        let ev_figs: Vec<&str> = ev.figures.iter().map(|f| f.path.as_str()).collect();
+        assert_eq!(ev_figs, ["figures/doppler_maps.png", "figures/vector_field.png", "figures/error_histograms.png"]);
+        assert!(ev.warnings.is_empty(), "{:?}", ev.warnings);
+        // The histograms have a row of panels (270 px) per field.
+        let hist = ev.figures.iter().find(|f| f.path.ends_with("error_histograms.png")).unwrap();
+        assert!(hist.height > 2 * 270, "two rows (raw, regularised): {}", hist.height);
         assert!((m[0] / m[2] - 1.0).abs() < 0.06, "{estimator}: mean vx {} vs truth {}", m[0], m[2]);
     }
 }
