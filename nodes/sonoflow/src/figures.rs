@@ -305,15 +305,17 @@ fn colour_bar(area: &Area<'_>, lo: f64, hi: f64, desc: &str, colour: impl Fn(f64
     let mut c = ChartBuilder::on(area)
         .margin_top(CAPTION_H + MARGIN)
         .margin_bottom(XLABEL_H + MARGIN)
-        .margin_right(8)
-        .y_label_area_size(52)
+        .margin_right(10)
+        .y_label_area_size(64)
         .build_cartesian_2d(0f64..1.0, lo..hi)
         .map_err(de)?;
+    let fy = tick_format((hi - lo) / 7.0);
     c.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
         .y_desc(desc)
         .y_labels(7)
+        .y_label_formatter(&fy)
         .label_style((FAMILY, 12))
         .axis_desc_style((FAMILY, 13))
         .draw()
@@ -333,7 +335,7 @@ fn title_row(area: &Area<'_>, title: &str) -> anyhow::Result<()> {
 }
 
 const TITLE_H: u32 = 32;
-const BAR_W: u32 = 100;
+const BAR_W: u32 = 112;
 
 // ---------------------------------------------------------------------------------------------
 // Colour Doppler maps
@@ -371,7 +373,7 @@ fn doppler_pixel(p: &DopplerPanel<'_>, i: usize, pref: f64) -> RGBColor {
         Some(pw) if pref > 0.0 => 10.0 * (pw[i] as f64 / pref).log10(),
         _ => 0.0,
     };
-    if no_est || !(db >= -DOPPLER_THRESHOLD_DB) {
+    if no_est || db.is_nan() || db < -DOPPLER_THRESHOLD_DB {
         power_grey(db)
     } else {
         doppler_colour(p.velocity[i] as f64 / p.nyquist)
@@ -590,7 +592,7 @@ pub struct ErrorSample<'a> {
 /// bin, non-finite values nowhere.
 pub fn histogram(values: &[f64], lo: f64, hi: f64, n: usize) -> Vec<usize> {
     let mut h = vec![0; n];
-    if n == 0 || !(hi > lo) {
+    if n == 0 || hi.is_nan() || lo.is_nan() || hi <= lo {
         return h;
     }
     for v in values.iter().filter(|v| v.is_finite()) {
