@@ -157,4 +157,8 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
     assert!((share("internal") - 54.0).abs() < 3.0 && (share("external") - 46.0).abs() < 3.0, "{line}");
     let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(report.contains("sph-flow") && report.contains("Error against ground truth"), "{report}");
+    // The figures on the carotid's 161 × 111 grid.
+    let mut figs = checked_figures(dir.path());
+    figs.sort();
+    assert_eq!(figs, ["doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]);
 }
