@@ -2,7 +2,9 @@
 //! [`crate::evaluate`]). Inputs: `truth` (required; planes vx, vz, mask) and any of `raw` and
 //! `regularised` (planes vx, vz, optional flags), matched by packet number. At the end it writes
 //! `evaluation.json` and `evaluation.md` into the run folder (the launcher puts the latter into
-//! `report.md`, beside the stage times) and prints one line per field.
+//! `report.md`, beside the stage times) and prints one line per field. Several evaluators in one
+//! graph (e.g. two estimators side by side) each get a `label`: their files are then
+//! `evaluation-<label>.json` / `.md`.
 
 use crate::evaluate::{field_error, FieldError};
 use crate::kinds::parse;
@@ -22,17 +24,39 @@ use std::time::Duration;
 pub struct EvaluatorParams {
     /// Pixels count when the truth mask covers their whole (2·margin+1)² neighbourhood (0 ..= 10).
     pub margin: usize,
+    /// Names this evaluation (e.g. the estimator it judges): files `evaluation-<label>.json/.md`,
+    /// the label in the report's heading and log lines. Empty (default): `evaluation.json/.md`.
+    /// Letters, digits, `-` and `_` only (≤ 64).
+    pub label: String,
 }
 
 impl Default for EvaluatorParams {
     fn default() -> Self {
-        Self { margin: 2 }
+        Self { margin: 2, label: String::new() }
+    }
+}
+
+impl EvaluatorParams {
+    /// File stem of this evaluator's output: `evaluation` or `evaluation-<label>`.
+    pub fn stem(&self) -> String {
+        if self.label.is_empty() {
+            "evaluation".to_string()
+        } else {
+            format!("evaluation-{}", self.label)
+        }
     }
 }
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     let p = parse::<EvaluatorParams>(v)?;
-    crate::kinds::in_range("margin", p.margin, 0, 10)
+    crate::kinds::in_range("margin", p.margin, 0, 10)?;
+    if p.label.len() > 64 || !p.label.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+        return Err(format!(
+            "label = {:?} is not allowed: up to 64 letters, digits, `-` or `_` (it names the files evaluation-<label>.json/.md)",
+            p.label
+        ));
+    }
+    Ok(())
 }
 
 /// One evaluated packet.
@@ -47,6 +71,9 @@ pub struct PacketEval {
 /// What the evaluator writes to `evaluation.json`.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Evaluation {
+    /// The evaluator's `label` (empty: the graph's only evaluation).
+    #[serde(default)]
+    pub label: String,
     pub margin: usize,
     pub packets: Vec<PacketEval>,
 }
@@ -82,7 +109,11 @@ pub fn evaluate_pair(truth: &Field, est: &Field, margin: usize) -> anyhow::Resul
 /// Markdown table of an evaluation (also used by the report).
 pub fn markdown(e: &Evaluation) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "## Error against ground truth\n");
+    if e.label.is_empty() {
+        let _ = writeln!(s, "## Error against ground truth\n");
+    } else {
+        let _ = writeln!(s, "## Error against ground truth: `{}`\n", e.label);
+    }
     let _ = writeln!(
         s,
         "Per packet, errors of vx and vz as fractions of the largest true speed, over the pixels inside the vessel (mask eroded by {} px); |e|₇₅: 75 % of the pixels are within ±this.\n",
@@ -142,7 +173,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     }
     let mut truths: BTreeMap<u32, Field> = BTreeMap::new();
     let mut estimates: BTreeMap<(u32, String), Field> = BTreeMap::new();
-    let mut eval = Evaluation { margin: p.margin, packets: Vec::new() };
+    let mut eval = Evaluation { label: p.label.clone(), margin: p.margin, packets: Vec::new() };
+    let tag = if p.label.is_empty() { String::new() } else { format!(" [{}]", p.label) };
     let mut done: BTreeMap<u32, PacketEval> = BTreeMap::new();
     let mut truth_eos = false;
     let mut est_eos = vec![false; est_in.len()];
@@ -175,7 +207,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let Some(truth) = truths.get(&key.0) else { continue };
             let fe = evaluate_pair(truth, &est, p.margin)?;
             println!(
-                "evaluator: packet {} {}: x bias {:+.1} %, |e|75 {:.1} %; z bias {:+.1} %, |e|75 {:.1} % of v_max {:.3} m/s ({} px)",
+                "evaluator{tag}: packet {} {}: x bias {:+.1} %, |e|75 {:.1} %; z bias {:+.1} %, |e|75 {:.1} % of v_max {:.3} m/s ({} px)",
                 key.0,
                 key.1,
                 100.0 * fe.x.bias,
@@ -216,8 +248,12 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     eval.packets = done.into_values().collect();
     if let Some(dir) = &kit.cfg.out_dir {
         let dir = std::path::Path::new(dir);
-        crate::nodeutil::write_atomic(&dir.join("evaluation.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
-        crate::nodeutil::write_atomic(&dir.join("evaluation.md"), markdown(&eval).as_bytes())?;
+        let stem = p.stem();
+        crate::nodeutil::write_atomic(
+            &dir.join(format!("{stem}.json")),
+            serde_json::to_string_pretty(&eval)?.as_bytes(),
+        )?;
+        crate::nodeutil::write_atomic(&dir.join(format!("{stem}.md")), markdown(&eval).as_bytes())?;
     }
     kit.stats.gaps = truth_in.gaps + est_in.iter().map(|(_, i)| i.gaps).sum::<u64>();
     kit.finish()?;

@@ -1,6 +1,7 @@
 //! The run report: `report.json` (machine-readable) and `report.md` (human), written at the end
 //! of every run; with an `evaluator` node in the graph, report.md also holds the errors against
-//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it).
+//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it; with several
+//! labelled evaluators, each one's `evaluation-<label>.md`).
 
 use crate::run::RunReport;
 use std::fmt::Write as _;
@@ -10,13 +11,33 @@ use std::path::Path;
 pub fn write(dir: &Path, r: &RunReport) -> anyhow::Result<()> {
     crate::nodeutil::write_atomic(&dir.join("report.json"), serde_json::to_string_pretty(r)?.as_bytes())?;
     let mut md = markdown(r);
-    // The evaluator's errors against ground truth, beside the stage times.
-    if let Ok(e) = std::fs::read_to_string(dir.join("evaluation.md")) {
-        md.push('\n');
-        md.push_str(&e);
+    // The evaluators' errors against ground truth, beside the stage times.
+    for f in evaluation_files(dir, "md") {
+        if let Ok(e) = std::fs::read_to_string(&f) {
+            md.push('\n');
+            md.push_str(&e);
+        }
     }
     crate::nodeutil::write_atomic(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
+}
+
+/// The evaluators' files with extension `ext` in `dir`: `evaluation.<ext>` first, then
+/// `evaluation-<label>.<ext>` by label.
+pub fn evaluation_files(dir: &Path, ext: &str) -> Vec<std::path::PathBuf> {
+    let mut v: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                    let Some(stem) = name.strip_suffix(&format!(".{ext}")) else { return false };
+                    stem == "evaluation" || stem.starts_with("evaluation-")
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort_by_key(|p| (p.file_stem().map(|s| s != "evaluation"), p.clone()));
+    v
 }
 
 /// Human-readable report.
