@@ -14,7 +14,9 @@ fn quick_matrix_matches_every_expectation_and_covers_every_stage() {
     let bad: Vec<String> = reports
         .iter()
         .filter(|r| !r.matches)
-        .map(|r| format!("{}/{}: expected {}, got {}: {}", r.stage.name(), r.name, r.expected, r.outcome.word(), r.detail))
+        .map(|r| {
+            format!("{}/{}: expected {}, got {}: {}", r.stage.name(), r.name, r.expected, r.outcome.word(), r.detail)
+        })
         .collect();
     assert!(bad.is_empty(), "cases not as expected:\n{}", bad.join("\n"));
     for s in Stage::ALL {

@@ -87,7 +87,8 @@ pub(super) fn cases() -> Vec<Case> {
         d(
             "exact-nyquist",
             "a phase step of exactly pi per frame (|v| = V_N, the sign is undecidable) and of 1.05 pi (wraps); check: \
-             |v| = V_N, 1.05 V_N reads -0.95 V_N, both flagged 'aliasing', finite (autocorrelation and Loupas)",
+             both flagged 'aliasing' and finite (autocorrelation and Loupas); autocorrelation: |v| = V_N, 1.05 V_N \
+             reads -0.95 V_N",
             Expected::Pass,
             exact_nyquist,
         ),
@@ -227,8 +228,13 @@ fn point_focus(_: &Ctx) -> CaseResult {
     let mut worst: f64 = 0.0;
     let mut parts = vec![];
     for rx_deg in [0.0f64, 15.0] {
-        let plan = DasPlan::new(&paper_das(3.0, rx_deg.to_radians(), sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples)
-            .msg()?;
+        let plan = DasPlan::new(
+            &paper_das(3.0, rx_deg.to_radians(), sim.plan.fs),
+            &TxWave::PlaneWave { tilt: 0.0 },
+            &grid,
+            sim.plan.n_samples,
+        )
+        .msg()?;
         let img = plan.apply_to_vec(&iq).msg()?;
         let Some((x, z)) = centroid(&img, &grid).filter(|_| finite_c(&img)) else {
             return Ok(Check::new(false, format!("rx {rx_deg}°: non-finite image or main lobe on the grid border")));
@@ -247,7 +253,9 @@ fn focus_on_pixel(_: &Ctx) -> CaseResult {
     let iq = sim.iq(&one(xf, zf)?, &tx)?;
     // 41 x 121 nodes, 25 µm steps: node (20, 60) is the focus exactly
     let grid = Grid::spanning(xf - 0.5e-3, xf + 0.5e-3, 41, zf - 1.5e-3, zf + 1.5e-3, 121).msg()?;
-    let plan = DasPlan::new(&paper_das(3.0, 0.0, sim.plan.fs), &TxWave::Focused { x0: xf, z0: zf }, &grid, sim.plan.n_samples).msg()?;
+    let plan =
+        DasPlan::new(&paper_das(3.0, 0.0, sim.plan.fs), &TxWave::Focused { x0: xf, z0: zf }, &grid, sim.plan.n_samples)
+            .msg()?;
     let img = plan.apply_to_vec(&iq).msg()?;
     let proj_ok = plan.projection().iter().all(|p| p[0].is_finite() && p[1].is_finite());
     let on_node = (grid.x(20) - xf).abs() < 1e-12 && (grid.z(60) - zf).abs() < 1e-12;
@@ -273,24 +281,39 @@ fn scatterer_iq() -> Result<(Vec<C32>, RfSim, Grid), String> {
 }
 
 fn fnumber_1000(_: &Ctx) -> CaseResult {
-    let (iq, sim, grid) = scatterer_iq()?;
-    let plan = DasPlan::new(&paper_das(1000.0, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples).msg()?;
+    let (iq, sim, _) = scatterer_iq()?;
+    // 50 µm columns: every 6th one lies under an element centre (x_e = (e - 63.5) 0.3 mm)
+    let grid = Grid::spanning(-1.95e-3, 1.95e-3, 79, 18e-3, 22e-3, 41).msg()?;
+    let plan =
+        DasPlan::new(&paper_das(1000.0, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples)
+            .msg()?;
     let img = plan.apply_to_vec(&iq).msg()?;
     let n = grid.n_pixels();
     let with: usize = (0..n).filter(|&p| plan.active_elements(p) > 0).count();
+    let most = (0..n).map(|p| plan.active_elements(p)).max().unwrap_or(0);
     let zero_where_none = (0..n).filter(|&p| plan.active_elements(p) == 0).all(|p| img[p] == C32::new(0.0, 0.0));
     let proj_ok = plan.projection().iter().all(|p| p[0].is_finite() && p[1].is_finite());
     Ok(Check::new(
-        finite_c(&img) && zero_where_none && proj_ok,
-        format!("{with} of {n} pixels have an element in their aperture; finite: {}; exactly 0 elsewhere: {zero_where_none}", finite_c(&img)),
+        finite_c(&img) && zero_where_none && proj_ok && with > 0,
+        format!(
+            "{with} of {n} pixels have an element in their aperture (at most {most}); finite: {}; exactly 0 \
+             elsewhere: {zero_where_none}",
+            finite_c(&img)
+        ),
     ))
 }
 
 fn fnumber_tiny(_: &Ctx) -> CaseResult {
     let (iq, sim, grid) = scatterer_iq()?;
     let tx = TxWave::PlaneWave { tilt: 0.0 };
-    let full = DasPlan::new(&paper_das(0.0, 0.0, sim.plan.fs), &tx, &grid, sim.plan.n_samples).msg()?.apply_to_vec(&iq).msg()?;
-    let tiny = DasPlan::new(&paper_das(0.01, 0.0, sim.plan.fs), &tx, &grid, sim.plan.n_samples).msg()?.apply_to_vec(&iq).msg()?;
+    let full = DasPlan::new(&paper_das(0.0, 0.0, sim.plan.fs), &tx, &grid, sim.plan.n_samples)
+        .msg()?
+        .apply_to_vec(&iq)
+        .msg()?;
+    let tiny = DasPlan::new(&paper_das(0.01, 0.0, sim.plan.fs), &tx, &grid, sim.plan.n_samples)
+        .msg()?
+        .apply_to_vec(&iq)
+        .msg()?;
     let diff = full.iter().zip(&tiny).map(|(a, b)| (a - b).norm()).fold(0.0f32, f32::max);
     let peak = full.iter().map(|c| c.norm()).fold(0.0f32, f32::max);
     Ok(Check::new(
@@ -305,7 +328,9 @@ fn grid_on_face(_: &Ctx) -> CaseResult {
     let mut worst = String::new();
     let mut ok = true;
     for f in [0.0, 1.5] {
-        let plan = DasPlan::new(&paper_das(f, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples).msg()?;
+        let plan =
+            DasPlan::new(&paper_das(f, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples)
+                .msg()?;
         let img = plan.apply_to_vec(&iq).msg()?;
         let grad_ok = plan.delay_gradient().iter().all(|g| g[0].is_finite() && g[1].is_finite());
         let face = (0..grid.nx).filter(|&ix| plan.active_elements(ix) > 0).count();
@@ -322,7 +347,9 @@ fn nan_rf(_: &Ctx) -> CaseResult {
     let mut sim = RfSim::new(0.03, 0.0)?;
     let tx = Transmit::plane_wave(&sim.probe, 1540.0, 0.0).msg()?;
     let grid = Grid::spanning(-1e-3, 1e-3, 11, 19e-3, 21e-3, 21).msg()?;
-    let plan = DasPlan::new(&paper_das(1.5, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples).msg()?;
+    let plan =
+        DasPlan::new(&paper_das(1.5, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples)
+            .msg()?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let mut scat = Scatterers::default();
     for _ in 0..50 {
@@ -341,13 +368,15 @@ fn nan_rf(_: &Ctx) -> CaseResult {
     let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
     let mut est = DopplerEstimator::for_plan(DopplerParams::new(5e6, 1540.0, 10e3), &plan).msg()?;
     let m = est.estimate_to_map(Packet::Frames(&refs)).msg()?;
-    let bad: Vec<usize> = (0..grid.n_pixels()).filter(|&p| refs.iter().any(|f| !(f[p].re.is_finite() && f[p].im.is_finite()))).collect();
+    let bad: Vec<usize> =
+        (0..grid.n_pixels()).filter(|&p| refs.iter().any(|f| !(f[p].re.is_finite() && f[p].im.is_finite()))).collect();
     let flagged = bad.iter().all(|&p| m.flags[p] & flags::NO_ESTIMATE != 0 && m.velocity[p] == 0.0);
     let map_finite = m.velocity.iter().chain(&m.variance).chain(&m.power).all(|v| v.is_finite());
     Ok(Check::new(
         flagged && map_finite && !bad.is_empty(),
         format!(
-            "{} of {} image pixels non-finite in frame 2, all flagged 'no estimate' with v = 0: {flagged}; Doppler map finite: {map_finite}",
+            "{} of {} image pixels non-finite in frame 2 (the NaN fills the element's whole I/Q trace through the \
+             IIR filtfilt), all flagged 'no estimate' with v = 0: {flagged}; Doppler map finite: {map_finite}",
             bad.len(),
             grid.n_pixels()
         ),
@@ -397,7 +426,12 @@ fn packet(steps: &[Option<f64>], nf: usize) -> Vec<Vec<C32>> {
         .collect()
 }
 
-fn doppler_map(steps: &[Option<f64>], nf: usize, est: Estimator, nan: Option<(usize, usize)>) -> Result<(sonoflow_beamform::DopplerMap, f64), String> {
+fn doppler_map(
+    steps: &[Option<f64>],
+    nf: usize,
+    est: Estimator,
+    nan: Option<(usize, usize)>,
+) -> Result<(sonoflow_beamform::DopplerMap, f64), String> {
     let mut frames = packet(steps, nf);
     if let Some((f, p)) = nan {
         frames[f][p] = C32::new(f32::NAN, 0.0);
@@ -421,11 +455,12 @@ fn exact_nyquist(_: &Ctx) -> CaseResult {
         let (m, vn) = doppler_map(&[Some(PI), Some(1.05 * PI)], 8, est, None)?;
         let (v0, v1) = (f64::from(m.velocity[0]) / vn, f64::from(m.velocity[1]) / vn);
         let flagged = m.flags.iter().all(|f| f & flags::ALIASING != 0);
-        let good = map_finite(&m) && flagged && (v0.abs() - 1.0).abs() < 1e-5;
-        // Loupas rescales by the estimated mean frequency, so only the autocorrelation value is exact
-        let wrap = est == Estimator::Loupas || (v1 + 0.95).abs() < 1e-5;
-        ok &= good && wrap;
-        detail.push(format!("{est:?}: v(pi) = {v0:+.6} V_N, v(1.05 pi) = {v1:+.4} V_N, flagged {flagged}"));
+        // Loupas rescales by the mean frequency estimated along depth, which a one-row synthetic
+        // packet does not have: only the autocorrelation values are exact here
+        let exact = est == Estimator::Loupas || ((v0.abs() - 1.0).abs() < 1e-5 && (v1 + 0.95).abs() < 1e-5);
+        ok &= map_finite(&m) && flagged && exact;
+        let note = if est == Estimator::Loupas { " (mean frequency clamped: no depth structure)" } else { "" };
+        detail.push(format!("{est:?}: v(pi) = {v0:+.6} V_N, v(1.05 pi) = {v1:+.4} V_N{note}, flagged {flagged}"));
     }
     Ok(Check::new(ok, detail.join("; ")))
 }
@@ -444,9 +479,18 @@ fn half_nyquist(_: &Ctx) -> CaseResult {
         })
         .collect();
     let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
-    let v = DopplerEstimator::new(DopplerParams::new(fc, c, prf), 1, 1, 1e-4).msg()?.estimate_to_map(Packet::Frames(&refs)).msg()?.velocity[0];
+    let v = DopplerEstimator::new(DopplerParams::new(fc, c, prf), 1, 1, 1e-4)
+        .msg()?
+        .estimate_to_map(Packet::Frames(&refs))
+        .msg()?
+        .velocity[0];
     let ok = (a - 0.5).abs() < 1e-6 && (b + 0.5).abs() < 1e-6 && unflagged && (f64::from(v) - v_true).abs() < 1e-4;
-    Ok(Check::new(ok, format!("+0.5 pi: {a:+.7} V_N, -0.5 pi: {b:+.7} V_N, unflagged {unflagged}; approaching 0.2 m/s reads {v:+.5} m/s")))
+    Ok(Check::new(
+        ok,
+        format!(
+            "+0.5 pi: {a:+.7} V_N, -0.5 pi: {b:+.7} V_N, unflagged {unflagged}; approaching 0.2 m/s reads {v:+.5} m/s"
+        ),
+    ))
 }
 
 fn zero_signal(_: &Ctx) -> CaseResult {
@@ -457,10 +501,18 @@ fn zero_signal(_: &Ctx) -> CaseResult {
 }
 
 fn nan_pixel(_: &Ctx) -> CaseResult {
-    let (m, vn) = doppler_map(&[Some(0.3 * PI), Some(0.3 * PI), Some(0.3 * PI)], 8, Estimator::Autocorrelation, Some((3, 1)))?;
+    let (m, vn) =
+        doppler_map(&[Some(0.3 * PI), Some(0.3 * PI), Some(0.3 * PI)], 8, Estimator::Autocorrelation, Some((3, 1)))?;
     let others = [0, 2].iter().all(|&p| m.flags[p] == 0 && (f64::from(m.velocity[p]) / vn - 0.3).abs() < 1e-5);
     let ok = map_finite(&m) && m.flags[1] == flags::NO_ESTIMATE && m.velocity[1] == 0.0 && others;
-    Ok(Check::new(ok, format!("flags {:?}, velocity / V_N {:?}", m.flags, m.velocity.iter().map(|v| f64::from(*v) / vn).collect::<Vec<_>>())))
+    Ok(Check::new(
+        ok,
+        format!(
+            "flags {:?}, velocity / V_N {:?}",
+            m.flags,
+            m.velocity.iter().map(|v| f64::from(*v) / vn).collect::<Vec<_>>()
+        ),
+    ))
 }
 
 fn simus_motion(_: &Ctx) -> CaseResult {
@@ -472,10 +524,13 @@ fn simus_motion(_: &Ctx) -> CaseResult {
     dp.window = [5, 5];
     let v = 0.5 * dp.nyquist_velocity();
     let grid = Grid::spanning(-1e-3, 1e-3, 11, 19e-3, 21e-3, 41).msg()?;
-    let plan = DasPlan::new(&paper_das(1.5, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples).msg()?;
+    let plan =
+        DasPlan::new(&paper_das(1.5, 0.0, sim.plan.fs), &TxWave::PlaneWave { tilt: 0.0 }, &grid, sim.plan.n_samples)
+            .msg()?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    let base: Vec<(f32, f32, f32)> =
-        (0..400).map(|_| (rng.gen_range(-3e-3f32..3e-3), rng.gen_range(17e-3f32..23e-3), rng.gen_range(-1f32..1.0))).collect();
+    let base: Vec<(f32, f32, f32)> = (0..400)
+        .map(|_| (rng.gen_range(-3e-3f32..3e-3), rng.gen_range(17e-3f32..23e-3), rng.gen_range(-1f32..1.0)))
+        .collect();
     let mut frames = vec![];
     for n in 0..n_frames {
         let dz = (v * n as f64 / prf) as f32;
@@ -520,7 +575,10 @@ fn vector_degenerate(_: &Ctx) -> CaseResult {
     solve_vector(&one_bad, &mut f).msg()?;
     let b = (f.flags[0], f.vx[0], f.vz[0]);
     let want = (flags::NO_ESTIMATE, 0.0, 0.0);
-    Ok(Check::new(a == want && b == want, format!("same angle twice: (flag, vx, vz) = {a:?}; one flagged input: {b:?}")))
+    Ok(Check::new(
+        a == want && b == want,
+        format!("same angle twice: (flag, vx, vz) = {a:?}; one flagged input: {b:?}"),
+    ))
 }
 
 fn single_frame(_: &Ctx) -> CaseResult {
@@ -531,7 +589,9 @@ fn single_frame(_: &Ctx) -> CaseResult {
 }
 
 fn zero_prf(_: &Ctx) -> CaseResult {
-    DopplerEstimator::new(DopplerParams::new(5e6, 1540.0, 0.0), 4, 4, 1e-4).map(|_| Check::new(true, "accepted PRF 0")).msg()
+    DopplerEstimator::new(DopplerParams::new(5e6, 1540.0, 0.0), 4, 4, 1e-4)
+        .map(|_| Check::new(true, "accepted PRF 0"))
+        .msg()
 }
 
 fn clutter_order(_: &Ctx) -> CaseResult {

@@ -139,7 +139,14 @@ pub(super) fn cases() -> Vec<Case> {
 fn advance_far(_: &Ctx) -> CaseResult {
     let (cx, cz, ang, dia, len) = (0.001, 0.025, 20.0f64, 6e-3, 0.04);
     let pipe = AnalyticFlowParams {
-        flow: FlowKind::Poiseuille { center_x: cx, center_z: cz, angle_deg: ang, diameter: dia, v_max: 100.0, length: len },
+        flow: FlowKind::Poiseuille {
+            center_x: cx,
+            center_z: cz,
+            angle_deg: ang,
+            diameter: dia,
+            v_max: 100.0,
+            length: len,
+        },
         density_per_mm2: 5.0,
         ..AnalyticFlowParams::default()
     };
@@ -171,7 +178,13 @@ fn advance_far(_: &Ctx) -> CaseResult {
         ..AnalyticFlowParams::default()
     };
     let mut g = AnalyticFlow::new(&disk).msg()?;
-    let r0: Vec<f64> = g.particles().x.iter().zip(&g.particles().z).map(|(x, z)| (f64::from(*x) - 0.002).hypot(f64::from(*z) - 0.03)).collect();
+    let r0: Vec<f64> = g
+        .particles()
+        .x
+        .iter()
+        .zip(&g.particles().z)
+        .map(|(x, z)| (f64::from(*x) - 0.002).hypot(f64::from(*z) - 0.03))
+        .collect();
     g.advance_to(1e6).msg()?;
     let gp = g.particles();
     let worst_r = (0..gp.len())
@@ -282,8 +295,14 @@ fn finished(ctx: &Ctx, name: &str) -> Result<Finished, String> {
         }
         let t = 1000 + u64::from(seq) * 10;
         let ch = if seq % 2 == 0 { a } else { b };
-        w.write(OutMessage { channel: ch, sequence: seq, log_time: t, publish_time: t, data: payload(u64::from(seq), 20 * 1024) })
-            .msg()?;
+        w.write(OutMessage {
+            channel: ch,
+            sequence: seq,
+            log_time: t,
+            publish_time: t,
+            data: payload(u64::from(seq), 20 * 1024),
+        })
+        .msg()?;
     }
     w.finish().msg()?;
     let bytes = std::fs::read(&path).msg()?;
@@ -317,7 +336,12 @@ fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize) -> CaseRes
     let stats = recover(&damaged, &out).msg()?;
     let rr = McapReader::open(&out).msg()?;
     let again = rr.messages(&ReadOptions::default()).msg()?.count();
-    let ok = !r.is_complete() && got.len() == want && in_order && stats.messages == want as u64 && rr.is_complete() && again == want;
+    let ok = !r.is_complete()
+        && got.len() == want
+        && in_order
+        && stats.messages == want as u64
+        && rr.is_complete()
+        && again == want;
     Ok(Check::new(
         ok,
         format!(
@@ -439,7 +463,11 @@ fn dangling(_: &Ctx) -> CaseResult {
 }
 
 fn out_of_range(_: &Ctx) -> CaseResult {
-    check_text(&GOOD.replace("n_channels = 4", "n_channels = 0").replace("max_elements = 1024", "max_elements = 0"), &[], &[])
+    check_text(
+        &GOOD.replace("n_channels = 4", "n_channels = 0").replace("max_elements = 1024", "max_elements = 0"),
+        &[],
+        &[],
+    )
 }
 
 fn two_producers(_: &Ctx) -> CaseResult {

@@ -117,7 +117,10 @@ fn zero_scatterers(_: &Ctx) -> CaseResult {
     let zeros2 = out.iter().all(|v| *v == 0.0);
     Ok(Check::new(
         ok1 && zeros1 && zeros2,
-        format!("{} x {} zero samples (planned length: {ok1}); fixed-plan buffer zeroed: {zeros2}", p.n_elements, rf.n_samples),
+        format!(
+            "{} x {} zero samples (planned length: {ok1}); fixed-plan buffer zeroed: {zeros2}",
+            p.n_elements, rf.n_samples
+        ),
     ))
 }
 
@@ -136,7 +139,10 @@ fn on_array_face(_: &Ctx) -> CaseResult {
     }
     Ok(Check::new(
         ok,
-        format!("finite; peak vs lambda/2 in front: element centre {:.3}, sub-element centre {:.3}", ratios[0], ratios[1]),
+        format!(
+            "finite; peak vs lambda/2 in front: element centre {:.3}, sub-element centre {:.3}",
+            ratios[0], ratios[1]
+        ),
     ))
 }
 
@@ -147,7 +153,10 @@ fn grazing(_: &Ctx) -> CaseResult {
     let rf = simus.simulate(&s, &pw0(&p)?).msg()?;
     let front = simus.simulate(&one(0.0, 0.03)?, &pw0(&p)?).msg()?;
     let r = peak(&rf.data) / peak(&front.data);
-    Ok(Check::new(finite(&rf.data) && r < 0.1, format!("finite: {}; peak {:.2e} of the scatterer in front", finite(&rf.data), r)))
+    Ok(Check::new(
+        finite(&rf.data) && r < 0.1,
+        format!("finite: {}; peak {:.2e} of the scatterer in front", finite(&rf.data), r),
+    ))
 }
 
 /// Squared envelope x² + H{x}² (Hilbert transform by FFT, zero-padded to 2n).
@@ -190,7 +199,10 @@ fn very_deep(_: &Ctx) -> CaseResult {
     let err = (num / den - want) * rf.fs;
     Ok(Check::new(
         finite(&rf.data) && rf.plan.n_freq > 3000 && err.abs() < 0.1,
-        format!("{} frequency bins, {} samples; echo centroid {err:+.3} samples from (z + d)/c", rf.plan.n_freq, rf.n_samples),
+        format!(
+            "{} frequency bins, {} samples; echo centroid {err:+.3} samples from (z + d)/c",
+            rf.plan.n_freq, rf.n_samples
+        ),
     ))
 }
 
@@ -283,5 +295,8 @@ fn plan_too_short(_: &Ctx) -> CaseResult {
     let mut simus = engine()?;
     let plan = simus.plan_for_max_distance(0.01, 0.0).msg()?;
     let mut out = vec![0f32; p.n_elements * plan.n_samples];
-    simus.simulate_into(&one(0.0, 0.1)?, &pw0(&p)?, &plan, &mut out).map(|_| Check::new(true, "no aliasing error")).msg()
+    simus
+        .simulate_into(&one(0.0, 0.1)?, &pw0(&p)?, &plan, &mut out)
+        .map(|_| Check::new(true, "no aliasing error"))
+        .msg()
 }

@@ -116,7 +116,9 @@ fn robust() -> SmoothnParams {
 }
 
 fn all_nan(_: &Ctx) -> CaseResult {
-    smoothn(&[f64::NAN; 60], &[5, 6], 2, None, &SmoothnParams::default()).map(|_| Check::new(false, "returned a result from no data")).msg()
+    smoothn(&[f64::NAN; 60], &[5, 6], 2, None, &SmoothnParams::default())
+        .map(|_| Check::new(false, "returned a result from no data"))
+        .msg()
 }
 
 fn zero_weights(_: &Ctx) -> CaseResult {
@@ -231,5 +233,7 @@ fn order_7(_: &Ctx) -> CaseResult {
 fn negative_weight(_: &Ctx) -> CaseResult {
     let mut w = vec![1.0; 12];
     w[4] = -0.5;
-    smoothn(&[0.0; 12], &[3, 4], 1, Some(&w), &SmoothnParams::default()).map(|_| Check::new(true, "accepted a negative weight")).msg()
+    smoothn(&[0.0; 12], &[3, 4], 1, Some(&w), &SmoothnParams::default())
+        .map(|_| Check::new(true, "accepted a negative weight"))
+        .msg()
 }

@@ -254,10 +254,8 @@ pub fn classify(expected: &Expected, result: std::thread::Result<CaseResult>) ->
             Expected::Pass => (Outcome::ClearError, format!("unexpected error: {msg}")),
         },
     };
-    let matches = matches!(
-        (expected, outcome),
-        (Expected::Pass, Outcome::Pass) | (Expected::ClearError(_), Outcome::ClearError)
-    );
+    let matches =
+        matches!((expected, outcome), (Expected::Pass, Outcome::Pass) | (Expected::ClearError(_), Outcome::ClearError));
     let detail = if outcome == Outcome::Pass && matches!(expected, Expected::ClearError(_)) {
         format!("no error: {detail}")
     } else {
@@ -374,7 +372,8 @@ struct Scratch(PathBuf);
 
 impl Scratch {
     fn new(parent: &Path) -> anyhow::Result<Self> {
-        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
+        let nanos =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
         let p = parent.join(format!("sonoflow-stability-{}-{nanos}", std::process::id()));
         std::fs::create_dir_all(&p).map_err(|e| anyhow::anyhow!("creating scratch folder {}: {e}", p.display()))?;
         Ok(Self(p))
@@ -388,7 +387,11 @@ impl Drop for Scratch {
 }
 
 /// Runs the matrix with a fresh scratch folder (removed afterwards): the library entry point.
-pub fn run_selected(quick: bool, only: Option<&str>, progress: impl FnMut(usize, &CaseReport)) -> anyhow::Result<Vec<CaseReport>> {
+pub fn run_selected(
+    quick: bool,
+    only: Option<&str>,
+    progress: impl FnMut(usize, &CaseReport),
+) -> anyhow::Result<Vec<CaseReport>> {
     let selected: Vec<Case> = cases().into_iter().filter(|c| only.is_none_or(|s| c.id().contains(s))).collect();
     if selected.is_empty() {
         anyhow::bail!("--only {only:?}: no case matches (cases are named stage/name, e.g. sph/hydrostatic-tank)");
@@ -427,7 +430,8 @@ pub fn run(args: &StabilityArgs) -> anyhow::Result<i32> {
         let p = dir.join("stability.md");
         std::fs::write(&p, md).map_err(|e| anyhow::anyhow!("writing {}: {e}", p.display()))?;
         let all = reports.iter().all(|r| r.matches);
-        let json = serde_json::to_string_pretty(&MatrixJson { quick: args.quick, all_as_expected: all, cases: &reports })?;
+        let json =
+            serde_json::to_string_pretty(&MatrixJson { quick: args.quick, all_as_expected: all, cases: &reports })?;
         let p = dir.join("stability.json");
         std::fs::write(&p, json).map_err(|e| anyhow::anyhow!("writing {}: {e}", p.display()))?;
         eprintln!("wrote {} and stability.json", dir.join("stability.md").display());
