@@ -160,9 +160,9 @@ fn advance_far(_: &Ctx) -> CaseResult {
     f.advance_to(1e6).msg()?;
     let p = f.particles();
     let (mut worst_q, mut out, mut worst_v) = (0.0f64, 0usize, 0.0f64);
-    for i in 0..p.len() {
+    for (i, q_start) in q0.iter().enumerate() {
         let (s, q) = local(p.x[i], p.z[i]);
-        worst_q = worst_q.max((q - q0[i]).abs());
+        worst_q = worst_q.max((q - q_start).abs());
         if s.abs() > 0.5 * len + 1e-6 || !(p.x[i].is_finite() && p.z[i].is_finite()) {
             out += 1;
         }

@@ -294,8 +294,11 @@ fn reversing(t0: Real) -> Result<Waveform, String> {
     WaveformSpec::Samples { period, values: v }.build().msg()
 }
 
-/// (worst profile error / 0.03, min gauge pressure, min pair / dx) across the reversal.
-fn reversal(quick: bool, pb_factor: Real) -> Result<(Real, Real, Real, Real), String> {
+/// (worst profile error / 0.03, min gauge pressure \[Pa\], min pair / dx, last time \[s\]) across the
+/// reversal.
+type Reversal = (Real, Real, Real, Real);
+
+fn reversal(quick: bool, pb_factor: Real) -> Result<Reversal, String> {
     // full: the reversal at 0.05 s as in sph/tests/stiff.rs, checked at 0.045 … 0.08 s; quick: the
     // same reversal 30 ms earlier (the developed start is the periodic Womersley solution, so the
     // history before the edge is the same), checked at 0.015 … 0.04 s.
@@ -323,8 +326,8 @@ fn reversal(quick: bool, pb_factor: Real) -> Result<(Real, Real, Real, Real), St
 }
 
 /// The p_b = 0 reversal run, once per mode (the p_b > 0 case compares with it).
-fn reversal_pb0(quick: bool) -> Result<(Real, Real, Real, Real), String> {
-    static RUNS: [std::sync::OnceLock<Result<(Real, Real, Real, Real), String>>; 2] =
+fn reversal_pb0(quick: bool) -> Result<Reversal, String> {
+    static RUNS: [std::sync::OnceLock<Result<Reversal, String>>; 2] =
         [std::sync::OnceLock::new(), std::sync::OnceLock::new()];
     RUNS[usize::from(quick)].get_or_init(|| reversal(quick, 0.0)).clone()
 }
@@ -545,8 +548,9 @@ fn far_too_small_c(_: &Ctx) -> CaseResult {
         Ok(_) => Ok(Check::new(true, "ran to t = 10 s")),
         Err(e) => {
             let p = &s.particles;
-            let bad =
-                (0..p.len()).filter(|&i| !p.kind[i].is_wall() && !(p.vx[i].is_finite() && p.vz[i].is_finite())).count();
+            let bad = (0..p.len())
+                .filter(|&i| !p.kind[i].is_wall() && (!p.vx[i].is_finite() || !p.vz[i].is_finite()))
+                .count();
             if bad > 0 {
                 Ok(Check::new(false, format!("{bad} non-finite fluid velocities left after: {e}")))
             } else {
