@@ -317,7 +317,7 @@ pub fn markdown_table(reports: &[CaseReport]) -> String {
             "| {} | {} | {} | {} | {} | {:.2} |",
             r.stage.name(),
             r.name,
-            cell(&r.expected, 60),
+            cell(&r.expected, 100),
             outcome,
             cell(&r.detail, 220),
             r.seconds
