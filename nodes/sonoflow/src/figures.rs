@@ -131,6 +131,15 @@ fn figure(name: &str, title: String, caption: String, (width, height): (u32, u32
     Figure { path: format!("{DIR}/{name}"), title, caption, width, height }
 }
 
+/// File name of figure `base` (one of the constants) for an evaluator `label`:
+/// `doppler_maps.png`, or `doppler_maps-<label>.png` when the label is not empty.
+pub fn file_name(base: &str, label: &str) -> String {
+    match (label.is_empty(), base.strip_suffix(".png")) {
+        (false, Some(stem)) => format!("{stem}-{label}.png"),
+        _ => base.to_string(),
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Colour maps
 
@@ -380,19 +389,21 @@ fn doppler_pixel(p: &DopplerPanel<'_>, i: usize, pref: f64) -> RGBColor {
     }
 }
 
-/// `figures/doppler_maps.png`: one panel per angle pair (4 per row), a colour bar, the vessel's
-/// outline where `outline` (a mask on the panels' grid) is given.
+/// `figures/doppler_maps[-label].png`: one panel per angle pair (4 per row), a colour bar, the
+/// vessel's outline where `outline` (a mask on the panels' grid) is given.
 pub fn doppler_maps(
     dir: &Path,
+    label: &str,
     heading: &str,
     panels: &[DopplerPanel<'_>],
     outline: Option<&[f32]>,
 ) -> anyhow::Result<Figure> {
-    doppler_maps_mapped(dir, heading, panels, outline).map(|r| r.0)
+    doppler_maps_mapped(dir, label, heading, panels, outline).map(|r| r.0)
 }
 
 fn doppler_maps_mapped(
     dir: &Path,
+    label: &str,
     heading: &str,
     panels: &[DopplerPanel<'_>],
     outline: Option<&[f32]>,
@@ -416,7 +427,8 @@ fn doppler_maps_mapped(
     let size = (cols as u32 * pw + BAR_W, TITLE_H + rows as u32 * ph);
     let same_vn = panels.iter().all(|p| (p.nyquist - first.nyquist).abs() <= 1e-9 * first.nyquist);
     let outline = outline.filter(|m| panels.iter().all(|p| p.grid == first.grid && m.len() == p.velocity.len()));
-    let maps = render(&dir.join(DIR).join(DOPPLER), size, |root| {
+    let name = file_name(DOPPLER, label);
+    let maps = render(&dir.join(DIR).join(&name), size, |root| {
         let (top, rest) = root.split_vertically(TITLE_H);
         title_row(&top, heading)?;
         let (grid_area, bar) = rest.split_horizontally(cols as u32 * pw);
@@ -442,7 +454,7 @@ fn doppler_maps_mapped(
         Ok(maps)
     })?;
     let fig = figure(
-        DOPPLER,
+        &name,
         heading.to_string(),
         format!(
             "Colour Doppler per angle pair: axial velocity, red toward the probe and blue away, full colour at ± the Nyquist velocity (beyond it aliasing wraps red ↔ blue); grey (log power, 40 dB span) where the power is over {DOPPLER_THRESHOLD_DB:.0} dB below the map's 99th percentile or there is no estimate{}.",
@@ -495,16 +507,18 @@ fn draw_arrow(root: &Area<'_>, tail: (f64, f64), tip: (f64, f64)) -> anyhow::Res
 /// v_max ↔ 0.9 steps, capped at twice that), plus the speed colour bar.
 pub fn vector_field(
     dir: &Path,
+    label: &str,
     heading: &str,
     grid: &GridV1,
     truth: (&[f32], &[f32], &[f32]),
     panels: &[VectorPanel<'_>],
 ) -> anyhow::Result<Figure> {
-    vector_field_mapped(dir, heading, grid, truth, panels).map(|r| r.0)
+    vector_field_mapped(dir, label, heading, grid, truth, panels).map(|r| r.0)
 }
 
 fn vector_field_mapped(
     dir: &Path,
+    label: &str,
     heading: &str,
     grid: &GridV1,
     truth: (&[f32], &[f32], &[f32]),
@@ -534,7 +548,8 @@ fn vector_field_mapped(
     let (xa, _, za, _) = extent_mm(grid);
     let (dx, dz) = (grid.dx * 1e3, grid.dz * 1e3);
     let scale = 0.9 * step as f64 * dx.min(dz) / v_max; // mm per m/s
-    let maps = render(&dir.join(DIR).join(VECTORS), size, |root| {
+    let name = file_name(VECTORS, label);
+    let maps = render(&dir.join(DIR).join(&name), size, |root| {
         let (top, rest) = root.split_vertically(TITLE_H);
         title_row(&top, heading)?;
         let (grid_area, bar) = rest.split_horizontally(panels.len() as u32 * pw);
@@ -567,7 +582,7 @@ fn vector_field_mapped(
         Ok(maps)
     })?;
     let fig = figure(
-        VECTORS,
+        &name,
         heading.to_string(),
         format!(
             "Colour: the true speed inside the vessel (grey outside); arrows: the estimated velocity every {step} pixels, v_max = {v_max:.3} m/s drawn {:.2} mm long (capped at twice that); arrows should follow the colour's flow and match it in length.",
@@ -631,12 +646,13 @@ pub const CRITERIA: [f64; 2] = [0.10, 0.02];
 
 /// `figures/error_histograms.png`: rows = fields, columns = vx, vz; percent of pixels per bin of
 /// the error in % of v_max, with bias, RMS and |e|₇₅ in each panel.
-pub fn error_histograms(dir: &Path, heading: &str, fields: &[ErrorSample<'_>]) -> anyhow::Result<Figure> {
-    error_histograms_mapped(dir, heading, fields).map(|r| r.0)
+pub fn error_histograms(dir: &Path, label: &str, heading: &str, fields: &[ErrorSample<'_>]) -> anyhow::Result<Figure> {
+    error_histograms_mapped(dir, label, heading, fields).map(|r| r.0)
 }
 
 fn error_histograms_mapped(
     dir: &Path,
+    label: &str,
     heading: &str,
     fields: &[ErrorSample<'_>],
 ) -> anyhow::Result<(Figure, Vec<PanelMap>)> {
@@ -649,7 +665,8 @@ fn error_histograms_mapped(
     ];
     let (pw, ph) = (430u32, 270u32);
     let size = (2 * pw, TITLE_H + fields.len() as u32 * ph);
-    let maps = render(&dir.join(DIR).join(ERRORS), size, |root| {
+    let name = file_name(ERRORS, label);
+    let maps = render(&dir.join(DIR).join(&name), size, |root| {
         let (top, rest) = root.split_vertically(TITLE_H);
         title_row(&top, heading)?;
         let mut maps = Vec::new();
@@ -720,7 +737,7 @@ fn error_histograms_mapped(
         Ok(maps)
     })?;
     let fig = figure(
-        ERRORS,
+        &name,
         heading.to_string(),
         format!(
             "Share of the vessel's pixels per bin of the error of vx and vz in % of the largest true speed (paper 1's figures 5–7); red lines: the paper's ±{:.0} % (vx) and ±{:.0} % (vz); the outermost bins also hold everything beyond the axis.",
@@ -926,7 +943,7 @@ mod tests {
         ex.extend(vec![0.071; 100]);
         let ez = vec![0.0113; 400];
         let f = ErrorSample { name: "raw".into(), ex: &ex, ez: &ez };
-        let (fig, maps) = error_histograms_mapped(dir.path(), "errors", &[f]).unwrap();
+        let (fig, maps) = error_histograms_mapped(dir.path(), "", "errors", &[f]).unwrap();
         assert_eq!(fig.path, "figures/error_histograms.png");
         let img = decode(&dir.path().join(&fig.path));
         assert_eq!((img.0, img.1), (fig.width, fig.height));
@@ -996,7 +1013,7 @@ mod tests {
                 nyquist: vn,
             })
             .collect();
-        let (fig, maps) = doppler_maps_mapped(dir.path(), "Doppler", &panels, Some(&mask)).unwrap();
+        let (fig, maps) = doppler_maps_mapped(dir.path(), "", "Doppler", &panels, Some(&mask)).unwrap();
         let img = decode(&dir.path().join(&fig.path));
         assert_eq!((img.0, img.1), (fig.width, fig.height));
         assert_eq!(maps.len(), 2);
@@ -1034,7 +1051,8 @@ mod tests {
             VectorPanel { name: "zero estimate".into(), vx: &zero, vz: &zero, flags: None },
             VectorPanel { name: "exact".into(), vx: &tvx, vz: &tvz, flags: None },
         ];
-        let (fig, maps) = vector_field_mapped(dir.path(), "vectors", &g, (&tvx, &tvz, &mask), &panels).unwrap();
+        let (fig, maps) = vector_field_mapped(dir.path(), "lbl", "vectors", &g, (&tvx, &tvz, &mask), &panels).unwrap();
+        assert_eq!(fig.path, "figures/vector_field-lbl.png", "a labelled evaluator's file");
         let img = decode(&dir.path().join(&fig.path));
         assert_eq!((img.0, img.1), (fig.width, fig.height));
         let speed = |i: usize| (tvx[i] as f64).hypot(tvz[i] as f64);
@@ -1115,11 +1133,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let g = grid(10);
         let short = vec![0.0f32; 50];
-        let e = vector_field(dir.path(), "v", &g, (&short, &short, &short), &[]).unwrap_err();
+        let e = vector_field(dir.path(), "", "v", &g, (&short, &short, &short), &[]).unwrap_err();
         assert!(e.to_string().contains("50 values for a 10 × 10 grid"), "{e}");
-        let e = doppler_maps(dir.path(), "d", &[], None).unwrap_err();
+        let e = doppler_maps(dir.path(), "", "d", &[], None).unwrap_err();
         assert!(e.to_string().contains("no Doppler maps"));
-        assert!(error_histograms(dir.path(), "e", &[]).is_err());
+        assert!(error_histograms(dir.path(), "", "e", &[]).is_err());
         assert!(stage_times(dir.path(), "s", &[]).is_err());
         let w = guarded("boom", || -> anyhow::Result<()> { panic!("kaboom") }).unwrap_err();
         assert!(w.contains("figure boom") && w.contains("kaboom"), "{w}");

@@ -1,5 +1,6 @@
 //! `sonoflow` — the user-facing binary: launcher (`run`, `check`), built-in node kinds
-//! (`node <kind>`), recording tools (`inspect`, `recover`) and benchmarks (`bench`).
+//! (`node <kind>`), recording tools (`inspect`, `recover`), benchmarks (`bench`) and the stability matrix
+//! (`stability`).
 //! Algorithms live in library crates; this crate wires them to the node kit.
 
 pub mod bench;
@@ -20,6 +21,7 @@ pub mod nodeutil;
 pub mod npy;
 pub mod report;
 pub mod run;
+pub mod stability;
 pub mod tool_beamform;
 pub mod tool_simus;
 pub mod tool_smoothn;

@@ -63,6 +63,8 @@ enum Cmd {
     Das(sonoflow::tool_beamform::DasArgs),
     /// Colour Doppler batch tool: (nz, nx, n_frames) packet .npy → velocity, power, variance, flags .npy.
     Doppler(sonoflow::tool_beamform::DopplerArgs),
+    /// Stability matrix: run the stiff and extreme cases of every stage, print case → outcome.
+    Stability(sonoflow::stability::StabilityArgs),
     /// Benchmarks (write a Markdown table).
     Bench {
         #[command(subcommand)]
@@ -156,6 +158,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Rf2iq(a) => sonoflow::tool_beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow::tool_beamform::run_das(&a),
         Cmd::Doppler(a) => sonoflow::tool_beamform::run_doppler(&a),
+        Cmd::Stability(a) => sonoflow::stability::run(&a),
         Cmd::Bench { what } => sonoflow::bench::run(what),
         Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }

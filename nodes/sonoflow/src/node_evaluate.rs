@@ -7,7 +7,9 @@
 //! `figures = false`, draws the report's figures into `<run>/figures/` ([`crate::figures`]):
 //! the colour Doppler maps and the vectors over the true speed of the last evaluated packet, and
 //! the error histograms pooled over all packets. A figure that cannot be drawn is a warning in
-//! `evaluation.json`, never an error of the node.
+//! `evaluation.json`, never an error of the node. Several evaluators in one graph (e.g. two
+//! estimators side by side) each get a `label`: their files are then `evaluation-<label>.json` /
+//! `.md` and `figures/<name>-<label>.png`.
 
 use crate::evaluate::{field_error_samples, FieldError};
 use crate::figures::{self, Figure};
@@ -28,19 +30,41 @@ use std::time::Duration;
 pub struct EvaluatorParams {
     /// Pixels count when the truth mask covers their whole (2·margin+1)² neighbourhood (0 ..= 10).
     pub margin: usize,
+    /// Names this evaluation (e.g. the estimator it judges): files `evaluation-<label>.json/.md`,
+    /// the label in the report's heading and log lines. Empty (default): `evaluation.json/.md`.
+    /// Letters, digits, `-` and `_` only (≤ 64).
+    pub label: String,
     /// Draw the report's figures into `<run>/figures/` at the end (default true).
     pub figures: bool,
 }
 
 impl Default for EvaluatorParams {
     fn default() -> Self {
-        Self { margin: 2, figures: true }
+        Self { margin: 2, label: String::new(), figures: true }
+    }
+}
+
+impl EvaluatorParams {
+    /// File stem of this evaluator's output: `evaluation` or `evaluation-<label>`.
+    pub fn stem(&self) -> String {
+        if self.label.is_empty() {
+            "evaluation".to_string()
+        } else {
+            format!("evaluation-{}", self.label)
+        }
     }
 }
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     let p = parse::<EvaluatorParams>(v)?;
-    crate::kinds::in_range("margin", p.margin, 0, 10)
+    crate::kinds::in_range("margin", p.margin, 0, 10)?;
+    if p.label.len() > 64 || !p.label.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+        return Err(format!(
+            "label = {:?} is not allowed: up to 64 letters, digits, `-` or `_` (it names the files evaluation-<label>.json/.md)",
+            p.label
+        ));
+    }
+    Ok(())
 }
 
 /// One evaluated packet.
@@ -55,6 +79,9 @@ pub struct PacketEval {
 /// What the evaluator writes to `evaluation.json`.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Evaluation {
+    /// The evaluator's `label` (empty: the graph's only evaluation).
+    #[serde(default)]
+    pub label: String,
     pub margin: usize,
     pub packets: Vec<PacketEval>,
     /// Figures written into `<run>/figures/` (paths relative to the run folder).
@@ -133,9 +160,16 @@ impl FigureData {
     }
 }
 
-/// Draws the evaluator's figures into `dir/figures/`: (figures written, warnings).
-pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize) -> (Vec<Figure>, Vec<String>) {
+/// Draws the evaluator's figures into `dir/figures/` (file names and headings carry a non-empty
+/// `label`): (figures written, warnings).
+pub fn write_figures(
+    dir: &std::path::Path,
+    data: &FigureData,
+    n_packets: usize,
+    label: &str,
+) -> (Vec<Figure>, Vec<String>) {
     let (mut figs, mut warns) = (Vec::new(), Vec::new());
+    let tag = if label.is_empty() { String::new() } else { format!(" — {label}") };
     let mut keep = |r: Result<Figure, String>| match r {
         Ok(f) => figs.push(f),
         Err(w) => warns.push(w),
@@ -176,7 +210,7 @@ pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize)
             let outline = last
                 .filter(|(p, t, _)| p == packet && maps.first().is_some_and(|m| m.0.grid == t.0.grid))
                 .and_then(|(_, t, _)| plane_of(&t.0, &t.1, plane::MASK));
-            figures::doppler_maps(dir, &format!("Colour Doppler, packet {packet}"), &panels, outline)
+            figures::doppler_maps(dir, label, &format!("Colour Doppler, packet {packet}{tag}"), &panels, outline)
         }));
     }
     if let Some((packet, truth, fields)) = last {
@@ -202,7 +236,11 @@ pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize)
             }
             figures::vector_field(
                 dir,
-                &format!("Estimated vectors over the true speed, packet {packet} (t = {:.4} s)", th.common.t_valid),
+                label,
+                &format!(
+                    "Estimated vectors over the true speed, packet {packet} (t = {:.4} s){tag}",
+                    th.common.t_valid
+                ),
                 &th.grid,
                 (tvx, tvz, mask),
                 &panels,
@@ -217,7 +255,7 @@ pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize)
                 .map(|(name, (ex, ez))| figures::ErrorSample { name: name.clone(), ex, ez })
                 .collect();
             let pooled = if n_packets == 1 { "1 packet".to_string() } else { format!("{n_packets} packets pooled") };
-            figures::error_histograms(dir, &format!("Errors against ground truth ({pooled})"), &fields)
+            figures::error_histograms(dir, label, &format!("Errors against ground truth ({pooled}){tag}"), &fields)
         }));
     }
     (figs, warns)
@@ -226,7 +264,11 @@ pub fn write_figures(dir: &std::path::Path, data: &FigureData, n_packets: usize)
 /// Markdown table of an evaluation (also used by the report).
 pub fn markdown(e: &Evaluation) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "## Error against ground truth\n");
+    if e.label.is_empty() {
+        let _ = writeln!(s, "## Error against ground truth\n");
+    } else {
+        let _ = writeln!(s, "## Error against ground truth: `{}`\n", e.label);
+    }
     let _ = writeln!(
         s,
         "Per packet, errors of vx and vz as fractions of the largest true speed, over the pixels inside the vessel (mask eroded by {} px); |e|₇₅: 75 % of the pixels are within ±this.\n",
@@ -295,7 +337,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     }
     let mut truths: BTreeMap<u32, Field> = BTreeMap::new();
     let mut estimates: BTreeMap<(u32, String), Field> = BTreeMap::new();
-    let mut eval = Evaluation { margin: p.margin, ..Default::default() };
+    let mut eval = Evaluation { label: p.label.clone(), margin: p.margin, ..Default::default() };
+    let tag = if p.label.is_empty() { String::new() } else { format!(" [{}]", p.label) };
     let mut done: BTreeMap<u32, PacketEval> = BTreeMap::new();
     let mut fig = FigureData::default();
     let mut truth_eos = false;
@@ -343,7 +386,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let Some(truth) = truths.get(&key.0) else { continue };
             let (fe, ex, ez) = evaluate_pair_samples(truth, &est, p.margin)?;
             println!(
-                "evaluator: packet {} {}: x bias {:+.1} %, |e|75 {:.1} %; z bias {:+.1} %, |e|75 {:.1} % of v_max {:.3} m/s ({} px)",
+                "evaluator{tag}: packet {} {}: x bias {:+.1} %, |e|75 {:.1} %; z bias {:+.1} %, |e|75 {:.1} % of v_max {:.3} m/s ({} px)",
                 key.0,
                 key.1,
                 100.0 * fe.x.bias,
@@ -392,19 +435,23 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         let dir = std::path::Path::new(dir);
         if p.figures {
             let t0 = std::time::Instant::now();
-            (eval.figures, eval.warnings) = write_figures(dir, &fig, eval.packets.len());
+            (eval.figures, eval.warnings) = write_figures(dir, &fig, eval.packets.len(), &p.label);
             for w in &eval.warnings {
-                eprintln!("evaluator: warning: {w}");
+                eprintln!("evaluator{tag}: warning: {w}");
             }
             println!(
-                "evaluator: {} figure(s) in {}/ ({:.0} ms)",
+                "evaluator{tag}: {} figure(s) in {}/ ({:.0} ms)",
                 eval.figures.len(),
                 figures::DIR,
                 1e3 * t0.elapsed().as_secs_f64()
             );
         }
-        crate::nodeutil::write_atomic(&dir.join("evaluation.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
-        crate::nodeutil::write_atomic(&dir.join("evaluation.md"), markdown(&eval).as_bytes())?;
+        let stem = p.stem();
+        crate::nodeutil::write_atomic(
+            &dir.join(format!("{stem}.json")),
+            serde_json::to_string_pretty(&eval)?.as_bytes(),
+        )?;
+        crate::nodeutil::write_atomic(&dir.join(format!("{stem}.md")), markdown(&eval).as_bytes())?;
     }
     kit.stats.gaps =
         truth_in.gaps + est_in.iter().map(|(_, i)| i.gaps).sum::<u64>() + maps_in.as_ref().map(|m| m.gaps).unwrap_or(0);
@@ -455,7 +502,7 @@ mod tests {
         let mut mh = DopplerMapHeaderV1 { grid, packet: 3, n_planes: 1, nyquist_velocity: 0.77, ..Default::default() };
         mh.plane_ids[0] = plane::POWER;
         fig.keep_map((mh, vec![1.0; n]));
-        let (figs, warns) = write_figures(dir.path(), &fig, 3);
+        let (figs, warns) = write_figures(dir.path(), &fig, 3, "");
         let paths: Vec<&str> = figs.iter().map(|f| f.path.as_str()).collect();
         assert_eq!(paths, ["figures/vector_field.png", "figures/error_histograms.png"]);
         assert!(figs[1].title.contains("3 packets pooled"), "{}", figs[1].title);

@@ -1,8 +1,9 @@
 //! The run report: `report.json` (machine-readable) and `report.md` (human), written at the end
 //! of every run; with an `evaluator` node in the graph, report.md also holds the errors against
-//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it). Figures
-//! (`figures/*.png`): the stage times always, drawn here; the evaluator's (colour Doppler, vectors,
-//! error histograms) listed in its `evaluation.json`. report.md shows each with a caption.
+//! ground truth (`evaluation.md`, the evaluator's table; `evaluation.json` beside it; with several
+//! labelled evaluators, each one's `evaluation-<label>.md`). Figures (`figures/*.png`): the stage
+//! times always, drawn here; the evaluators' (colour Doppler, vectors, error histograms) listed
+//! in their `evaluation*.json`. report.md shows each with a caption.
 
 use crate::run::RunReport;
 use std::fmt::Write as _;
@@ -20,8 +21,8 @@ pub fn stage_rows(r: &RunReport) -> Vec<crate::figures::StageRow> {
         .collect()
 }
 
-/// Draws the stage-time chart into `dir/figures/` and collects the evaluator's figures from
-/// `dir/evaluation.json` into `r.figures`; every problem becomes a warning of the report.
+/// Draws the stage-time chart into `dir/figures/` and collects the evaluators' figures from
+/// `dir/evaluation*.json` into `r.figures`; every problem becomes a warning of the report.
 pub fn add_figures(dir: &Path, r: &mut RunReport) {
     let heading = format!("Stage times — {} ({}, {:.2} s)", r.graph, r.status, r.wall_s);
     let rows = stage_rows(r);
@@ -29,8 +30,8 @@ pub fn add_figures(dir: &Path, r: &mut RunReport) {
         Ok(f) => r.figures.push(f),
         Err(w) => r.warnings.push(w),
     }
-    let path = dir.join("evaluation.json");
-    if let Ok(text) = std::fs::read_to_string(&path) {
+    for path in evaluation_files(dir, "json") {
+        let Ok(text) = std::fs::read_to_string(&path) else { continue };
         match serde_json::from_str::<crate::node_evaluate::Evaluation>(&text) {
             Ok(e) => {
                 r.figures.extend(e.figures.into_iter().filter(|f| dir.join(&f.path).is_file()));
@@ -45,10 +46,12 @@ pub fn add_figures(dir: &Path, r: &mut RunReport) {
 pub fn write(dir: &Path, r: &RunReport) -> anyhow::Result<()> {
     crate::nodeutil::write_atomic(&dir.join("report.json"), serde_json::to_string_pretty(r)?.as_bytes())?;
     let mut md = markdown(r);
-    // The evaluator's errors against ground truth, beside the stage times.
-    if let Ok(e) = std::fs::read_to_string(dir.join("evaluation.md")) {
-        md.push('\n');
-        md.push_str(&e);
+    // The evaluators' errors against ground truth, beside the stage times.
+    for f in evaluation_files(dir, "md") {
+        if let Ok(e) = std::fs::read_to_string(&f) {
+            md.push('\n');
+            md.push_str(&e);
+        }
     }
     md.push_str(&figures_markdown(&r.figures));
     crate::nodeutil::write_atomic(&dir.join("report.md"), md.as_bytes())?;
@@ -67,6 +70,24 @@ pub fn figures_markdown(figs: &[crate::figures::Figure]) -> String {
         let _ = writeln!(s, "*{}* {}\n", f.title, f.caption);
     }
     s
+}
+
+/// The evaluators' files with extension `ext` in `dir`: `evaluation.<ext>` first, then
+/// `evaluation-<label>.<ext>` by label.
+pub fn evaluation_files(dir: &Path, ext: &str) -> Vec<std::path::PathBuf> {
+    let mut v: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                    let Some(stem) = name.strip_suffix(&format!(".{ext}")) else { return false };
+                    stem == "evaluation" || stem.starts_with("evaluation-")
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort_by_key(|p| (p.file_stem().map(|s| s != "evaluation"), p.clone()));
+    v
 }
 
 /// Human-readable report.

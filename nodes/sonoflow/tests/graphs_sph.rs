@@ -68,7 +68,10 @@ fn sph_tube_publishes_scatterers_truth_and_diagnostics_and_resumes_from_its_chec
             let (x, z) = (h.grid.x0 + ix as f64 * h.grid.dx, h.grid.z0 + iz as f64 * h.grid.dz);
             let y = z - 0.02;
             let m = f[2 * nn + i];
-            assert_eq!(m == 1.0, y.abs() < 4e-3, "mask at z = {z}");
+            // (a pixel exactly on the wall is a tie that the rounding of the sampled SDF decides)
+            if (y.abs() - 4e-3).abs() > 1e-9 {
+                assert_eq!(m == 1.0, y.abs() < 4e-3, "mask at z = {z}");
+            }
             // away from the ends of the tube (±20 mm) and half a spacing or more inside the wall
             if m == 1.0 && x.abs() < 0.01 && y.abs() < 3.5e-3 {
                 let exact = 1.5 * 0.05 * (1.0 - (y / 4e-3).powi(2));
@@ -161,4 +164,57 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
     let mut figs = checked_figures(dir.path());
     figs.sort();
     assert_eq!(figs, ["doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]);
+
+    // replay-estimators on this recording: no fluid, SIMUS or beamforming; the autocorrelation
+    // estimator on the replayed I/Q gives exactly the errors of the original run (bit-identical
+    // replay), Loupas' estimator its own, both in the report
+    let re = dir.path().join("replay");
+    let rec = dir.path().join("recording.mcap");
+    let set_path = format!("replay.path={:?}", rec.display().to_string());
+    let out = run_graph("launch/replay-estimators.toml", &re, &["--set", &set_path]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let read =
+        |p: std::path::PathBuf| -> serde_json::Value { serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap() };
+    let ac = read(re.join("evaluation-autocorrelation.json"));
+    let lp = read(re.join("evaluation-loupas.json"));
+    assert_eq!(ac["label"], "autocorrelation");
+    for field in ["raw", "regularised"] {
+        assert_eq!(ac["packets"][0]["fields"][field], eval["packets"][0]["fields"][field], "{field}");
+        let l = &lp["packets"][0]["fields"][field];
+        assert_eq!(l["pixels"], ac["packets"][0]["fields"][field]["pixels"], "{field}");
+        let (lz, lx) = (l["z"]["abs_p75"].as_f64().unwrap(), l["x"]["abs_p75"].as_f64().unwrap());
+        eprintln!("replayed, loupas {field}: |e|75 z {:.1} %, x {:.1} %", 100.0 * lz, 100.0 * lx);
+        // the same I/Q: Loupas' estimate is close to the autocorrelation one, not the same bits
+        assert!(lz < 0.05 && lx < 0.30, "loupas {field}: z {lz}, x {lx}");
+        assert_ne!(l, &ac["packets"][0]["fields"][field], "loupas gave the autocorrelation's errors");
+    }
+    let report = std::fs::read_to_string(re.join("report.md")).unwrap();
+    assert!(
+        report.contains("Error against ground truth: `autocorrelation`")
+            && report.contains("Error against ground truth: `loupas`"),
+        "{report}"
+    );
+    // Each labelled evaluator draws its own figures, beside the launcher's stage times.
+    let mut figs = checked_figures(&re);
+    figs.sort();
+    let want: Vec<String> = ["autocorrelation", "loupas"]
+        .iter()
+        .flat_map(|l| ["doppler_maps", "error_histograms", "vector_field"].map(|f| format!("{f}-{l}.png")))
+        .chain(std::iter::once("stage_times.png".to_string()))
+        .collect();
+    let mut want = want;
+    want.sort();
+    assert_eq!(figs, want);
+    let nodes =
+        read(re.join("report.json"))["nodes"].as_array().unwrap().iter().map(|n| n["name"].clone()).collect::<Vec<_>>();
+    assert!(!nodes.iter().any(|n| n == "flow" || n == "simus" || n == "beamformer"), "{nodes:?}");
+    let cpu = |v: &serde_json::Value| -> f64 {
+        v["nodes"].as_array().unwrap().iter().filter_map(|n| n["stats"]["compute_ns_total"].as_f64()).sum::<f64>() / 1e9
+    };
+    eprintln!(
+        "compute CPU: original run {:.2} s, replay-estimators {:.2} s",
+        cpu(&read(dir.path().join("report.json"))),
+        cpu(&read(re.join("report.json")))
+    );
 }

@@ -7,7 +7,7 @@
 //! `cargo run --release -p sonoflow-sph --example carotid -- [dx_mm=0.3] [t_end=0.83] [every=0.05] [c=5.5] [shifting=0] [checkpoint_out]`
 //! (with `CHECKPOINT_IN`, `t_end` is the duration after the checkpoint's time)
 //! Environment: `DELTA` (δ-SPH), `TENSILE`, `PB` (background pressure), `H_OVER_DX` (1.2), `CFL` (0.25),
-//! `GEOM=tube` (a straight tube instead), `CHECKPOINT_IN` (resume), `PARALLEL=0` (no rayon), `INTEGRATOR=single` (one evaluation per step).
+//! `GEOM=tube` (a straight tube instead), `CHECKPOINT_IN` (resume), `PARALLEL=0` (no rayon), `INTEGRATOR=single` (one evaluation per step), `WALL_LAYERS` (type II layers; default from the support).
 
 use sonoflow_sph::geometry::{carotid_bifurcation, BuildOptions, InitialVelocity};
 use sonoflow_sph::{ProfileKind, Real, Solver, SphParams, WaveformSpec};
@@ -49,6 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         profile: ProfileKind::Womersley,
         initial_velocity: InitialVelocity::FullyDeveloped,
         relax_iterations: 200,
+        wall_layers: std::env::var("WALL_LAYERS").ok().and_then(|v| v.parse().ok()),
         ..BuildOptions::for_solver(&params, dx)
     };
     let t0 = std::time::Instant::now();
@@ -78,6 +79,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     .with_domain(domain);
     let t_begin = s.time();
     let start = std::time::Instant::now();
+    let cpu0 = process_cpu_s();
     let steps0 = s.steps();
     let n = (t_end / every).round().max(1.0) as usize;
     let mut last: Vec<Real> = vec![0.0; names.len()];
@@ -117,7 +119,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
         }
         println!(
-            "t {t:.3} s  fluid {}  max|rho/rho0-1| {:.2e}  KE {:.3e}  vmax {:.3} m/s  min pair {:.2} dx (id {})  steps {}  dt {:.2e} ({:?})  in {:.3e} out {:.3e} split {:?}  guard {}  shift ratio {:.4}  wall {:.0} s ({:.1} steps/s)",
+            "t {t:.3} s  fluid {}  max|rho/rho0-1| {:.2e}  KE {:.3e}  vmax {:.3} m/s  min pair {:.2} dx (id {})  steps {}  dt {:.2e} ({:?})  in {:.3e} out {:.3e} split {:?}  guard {}  shift ratio {:.4}  wall {:.0} s ({:.1} steps/s; CPU {:.0} s, {:.1} steps per CPU s)",
             d.n_fluid,
             d.max_density_error,
             d.kinetic_energy,
@@ -133,7 +135,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             d.guard_corrections,
             d.shift_ratio,
             wall,
-            (d.steps - steps0) as Real / wall
+            (d.steps - steps0) as Real / wall,
+            process_cpu_s() - cpu0,
+            (d.steps - steps0) as Real / (process_cpu_s() - cpu0)
         );
     }
     let out: Real = -total_out[1..].iter().sum::<Real>();
@@ -153,4 +157,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("checkpoint written to {p}");
     }
     Ok(())
+}
+
+/// CPU seconds (user + system) of this process so far, from /proc/self/stat (0 where unavailable):
+/// robust to the other core's load, unlike the wall clock.
+fn process_cpu_s() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
+    // fields after the command name (which is in parentheses): utime and stime are fields 14, 15
+    let Some(rest) = stat.rfind(')').map(|i| &stat[i + 2..]) else { return 0.0 };
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0
 }

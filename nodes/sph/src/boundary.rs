@@ -300,38 +300,54 @@ pub fn extrapolate_density(
     rho0: Real,
     sums: &mut Vec<(Real, u32)>,
 ) {
-    for (g, b) in states.iter().enumerate() {
-        let n = b.spec.n_lanes();
-        let dy = b.spec.lane_spacing();
-        sums.clear();
-        sums.resize(n + 1, (0.0, 0)); // last entry: the whole opening
-        for i in 0..p.len() {
-            if p.kind[i] != ParticleKind::Fluid || !b.spec.near(p.x[i], p.z[i], support) {
+    // one pass over the particles for all openings: opening g's lanes at offsets[g] .. offsets[g+1]
+    // − 1 of `sums`, its whole-opening sum at offsets[g+1] − 1
+    let mut offsets = Vec::with_capacity(states.len() + 1);
+    offsets.push(0);
+    for b in states {
+        offsets.push(offsets[offsets.len() - 1] + b.spec.n_lanes() + 1);
+    }
+    sums.clear();
+    sums.resize(offsets[states.len()], (0.0, 0));
+    for i in 0..p.len() {
+        if p.kind[i] != ParticleKind::Fluid {
+            continue;
+        }
+        for (g, b) in states.iter().enumerate() {
+            if !b.spec.near(p.x[i], p.z[i], support) {
                 continue;
             }
             let (s, y) = b.spec.local(p.x[i], p.z[i]);
             if s > 0.0 || s < -support || y.abs() > b.spec.half_width {
                 continue;
             }
+            let n = b.spec.n_lanes();
+            let dy = b.spec.lane_spacing();
+            let own = &mut sums[offsets[g]..offsets[g + 1]];
             let j = b.spec.lane_of(y);
             let k0 = j.saturating_sub(2);
-            for (k, sum) in sums[..n].iter_mut().enumerate().skip(k0).take(5) {
+            for (k, sum) in own[..n].iter_mut().enumerate().skip(k0).take(5) {
                 if (y - b.spec.lane_y(k)).abs() <= 1.5 * dy {
                     sum.0 += p.rho[i];
                     sum.1 += 1;
                 }
             }
-            sums[n].0 += p.rho[i];
-            sums[n].1 += 1;
+            own[n].0 += p.rho[i];
+            own[n].1 += 1;
         }
-        let all = if sums[n].1 > 0 { sums[n].0 / sums[n].1 as Real } else { rho0 };
-        for i in 0..p.len() {
-            if p.kind[i] == ParticleKind::Buffer && p.group[i] as usize == g {
-                let (_, y) = b.spec.local(p.x[i], p.z[i]);
-                let (sum, cnt) = sums[b.spec.lane_of(y)];
-                p.rho[i] = if cnt > 0 { sum / cnt as Real } else { all };
-            }
+    }
+    for i in 0..p.len() {
+        if p.kind[i] != ParticleKind::Buffer {
+            continue;
         }
+        let g = p.group[i] as usize;
+        let Some(b) = states.get(g) else { continue };
+        let own = &sums[offsets[g]..offsets[g + 1]];
+        let n = b.spec.n_lanes();
+        let all = if own[n].1 > 0 { own[n].0 / own[n].1 as Real } else { rho0 };
+        let (_, y) = b.spec.local(p.x[i], p.z[i]);
+        let (sum, cnt) = own[b.spec.lane_of(y)];
+        p.rho[i] = if cnt > 0 { sum / cnt as Real } else { all };
     }
 }
 

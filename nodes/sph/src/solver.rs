@@ -203,6 +203,9 @@ pub struct Solver {
     rates0: Vec<Rate>,
     /// `rates0` is aligned with the particles and may be reused.
     carried: bool,
+    /// The next evaluation also fills the workspace's velocities, pressures and densities (walls
+    /// interpolated), not only the rates.
+    want_state: bool,
 }
 
 impl Solver {
@@ -268,6 +271,7 @@ impl Solver {
             shift_sums: (0.0, 0.0),
             rates0: Vec::new(),
             carried: false,
+            want_state: false,
         };
         s.wrap_positions();
         Ok(s)
@@ -310,7 +314,9 @@ impl Solver {
     pub fn sample_velocity(&mut self, xs: &[Real], zs: &[Real]) -> Vec<[Real; 3]> {
         let t = self.time;
         self.set_boundary_time(t);
+        self.want_state = true;
         self.evaluate(t);
+        self.want_state = false;
         let r = self.kernel.support_radius();
         self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
         let (p, ws, k) = (&self.particles, &self.ws, &self.kernel);
@@ -580,6 +586,8 @@ impl Solver {
         let g = self.body_force_at(t);
         // the fast evaluator has no tensile correction: the reference computes that case
         if self.params.fast_rhs && self.params.tensile_correction == 0.0 {
+            // the steps need the rates only; `sample_velocity` asks for the state as well
+            self.fast.rates_only = !self.want_state;
             fast::compute_rates(&self.params, &self.kernel, &self.particles, g, &mut self.ws, &mut self.fast);
             return;
         }
@@ -703,23 +711,22 @@ impl Solver {
         let t_half = t_n + half;
         self.set_boundary_time(t_half);
         self.evaluate(t_half);
-        self.check_rates()?;
-        self.min_pair = (Real::INFINITY, 0);
-        for (i, r) in self.ws.rates.iter().enumerate() {
-            if self.particles.kind[i].is_fluid() && r.r2min < self.min_pair.0 {
-                self.min_pair = (r.r2min, self.particles.id[i]);
-            }
-        }
-        self.min_pair.0 = self.min_pair.0.sqrt();
-        // Corrector and final update.
+        // Corrector and final update, in one pass over the rates with their finiteness check
+        // (`check_rates`, reported before anything else) and the nearest pair.
         let mut max_err = 0.0 as Real;
         let mut worst = 0usize;
         let mut first_bad: Option<usize> = None;
+        let mut bad_rate: Option<usize> = None;
+        let mut min_pair = (Real::INFINITY, 0usize);
         {
             let pt = &mut self.particles;
             let rho_ref = self.params.rho0;
             for i in 0..n {
                 let r = self.ws.rates[i];
+                // a sum is finite only if every term is
+                if bad_rate.is_none() && !(r.drho + r.acc[0] + r.acc[1]).is_finite() {
+                    bad_rate = Some(i);
+                }
                 let (vxh, vzh) = match pt.kind[i] {
                     ParticleKind::Fluid => (self.vx0[i] + half * r.acc[0], self.vz0[i] + half * r.acc[1]),
                     ParticleKind::Buffer => {
@@ -738,6 +745,9 @@ impl Solver {
                 pt.x[i] = 2.0 * xh - self.x0[i];
                 pt.z[i] = 2.0 * zh - self.z0[i];
                 if pt.kind[i].is_fluid() {
+                    if r.r2min < min_pair.0 {
+                        min_pair = (r.r2min, i);
+                    }
                     let e = (pt.rho[i] / rho_ref - 1.0).abs();
                     if e > max_err || e.is_nan() {
                         max_err = e;
@@ -750,6 +760,11 @@ impl Solver {
                 }
             }
         }
+        if bad_rate.is_some() {
+            // the first particle with a non-finite rate, named as `check_rates` names it
+            self.check_rates()?;
+        }
+        self.min_pair = (min_pair.0.sqrt(), if min_pair.0.is_finite() { self.particles.id[min_pair.1] } else { 0 });
         if let Some(i) = first_bad {
             let pt = &self.particles;
             let vals = [

@@ -105,6 +105,8 @@ pub struct FastWorkspace {
     /// Cells per support radius; 0 = [`REACH`].
     reach: usize,
     phases: [Real; 5],
+    /// Fill only `ws.rates` (the solver's steps); `ws.ux`, `uz`, `p`, `rho` are left as they are.
+    pub(crate) rates_only: bool,
 }
 
 thread_local! {
@@ -456,6 +458,23 @@ impl FastWorkspace {
     /// Results in the particles' order: the particles' own state, the walls' interpolated one, the
     /// rates.
     fn scatter(&self, params: &SphParams, p: &Particles, ws: &mut Workspace) {
+        let rank = &self.grid.rank;
+        if !self.rates_only {
+            self.scatter_state(params, p, ws);
+        }
+        let rates = &self.rates;
+        #[cfg(feature = "parallel")]
+        if params.parallel {
+            use rayon::prelude::*;
+            rank.par_iter().map(|&k| rates[k as usize]).collect_into_vec(&mut ws.rates);
+            return;
+        }
+        ws.rates.clear();
+        ws.rates.extend(rank.iter().map(|&k| rates[k as usize]));
+    }
+
+    /// The particles' own state and the walls' interpolated one, in the particles' order.
+    fn scatter_state(&self, params: &SphParams, p: &Particles, ws: &mut Workspace) {
         ws.ux.clone_from(&p.vx);
         ws.uz.clone_from(&p.vz);
         ws.rho.clone_from(&p.rho);
@@ -470,15 +489,6 @@ impl FastWorkspace {
                 }
             }
         }
-        let rates = &self.rates;
-        #[cfg(feature = "parallel")]
-        if params.parallel {
-            use rayon::prelude::*;
-            rank.par_iter().map(|&k| rates[k as usize]).collect_into_vec(&mut ws.rates);
-            return;
-        }
-        ws.rates.clear();
-        ws.rates.extend(rank.iter().map(|&k| rates[k as usize]));
     }
 }
 

@@ -41,7 +41,8 @@ pub struct BuildOptions {
     /// 0.45e-3 (quartic spline, 2.5 h with h = 1.2 dx = 0.18 mm). [`BuildOptions::for_solver`] sets it
     /// from solver parameters.
     pub support: Real,
-    /// Layers of type II wall particles (at SDF = dx, 2dx, …). Default `None`: ceil(support / dx).
+    /// Layers of type II wall particles (at SDF = dx, 2dx, …). Default `None`: the layers k with
+    /// k·dx < support (see [`BuildOptions::layers`]).
     pub wall_layers: Option<usize>,
     /// Depth of each reservoir along its normal \[m\], ≥ `support`. Default `None`: support + 2 dx.
     pub reservoir_depth: Option<Real>,
@@ -118,9 +119,12 @@ impl BuildOptions {
         }
     }
 
-    /// Type II layers in use: `wall_layers`, or ceil(support / dx).
+    /// Type II layers in use: `wall_layers`, or every layer a fluid particle on the wall can reach:
+    /// k = 1, 2, … with k·dx < support (2 for the quartic spline's 2.5 h = 3 dx at h = 1.2 dx: the
+    /// layer at 3 dx would only touch fluid that has crossed the wall, which the guard puts back).
     pub fn layers(&self) -> usize {
-        self.wall_layers.unwrap_or_else(|| ((self.support / self.dx) * (1.0 - 1e-9)).ceil().max(1.0) as usize)
+        self.wall_layers
+            .unwrap_or_else(|| (((self.support / self.dx) * (1.0 - 1e-9)).ceil() as usize).saturating_sub(1).max(1))
     }
 
     /// Reservoir depth in use \[m\]: `reservoir_depth`, or support + 2 dx.

@@ -1,0 +1,239 @@
+//! smoothn cases (from `nodes/smoothn/tests/extremes.rs` and `robustness.rs`, plus 90 % missing
+//! data and 200 decades of scale).
+
+use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use sonoflow_smoothn::{smoothn, SmoothnParams};
+
+pub(super) fn cases() -> Vec<Case> {
+    fn c(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
+        Case { stage: Stage::Smoothn, name, stresses, expected, run }
+    }
+    vec![
+        c(
+            "all-nan",
+            "a 2-component 5 x 6 field that is NaN everywhere",
+            Expected::ClearError(&["no valid data", "30 grid points"]),
+            all_nan,
+        ),
+        c(
+            "all-zero-weights",
+            "finite data with every weight 0",
+            Expected::ClearError(&["no valid data"]),
+            zero_weights,
+        ),
+        c(
+            "infinities-like-nan",
+            "±inf at 5 points where another run has NaN (robust, automatic S); check: bit-identical results, finite",
+            Expected::Pass,
+            infinities,
+        ),
+        c(
+            "90pc-missing",
+            "a smooth 64 x 64 vector field with 90 % of the points missing at random and noise sigma = 0.05; check: \
+             converged, finite, RMS error of the filled field < 0.1 (a zero or mean fill is off by ~0.6)",
+            Expected::Pass,
+            missing_90,
+        ),
+        c(
+            "10pc-gross-outliers",
+            "noise sigma = 0.1 plus 10 % of the points replaced by uniform values in ±2.5, robust bisquare; check: RMS \
+             error < 0.3 x the non-robust error and < 2 x the outlier-free error",
+            Expected::Pass,
+            outliers,
+        ),
+        c(
+            "scale-1e-100-and-1e100",
+            "the same noisy field multiplied by 1e-100 and by 1e100 (automatic S); check: S identical and the result \
+             scales exactly (relative 1e-9): no underflow/overflow in the GCV sums",
+            Expected::Pass,
+            scale_extremes,
+        ),
+        c(
+            "constant-field",
+            "a constant field (robust, automatic S, and S = 1e3); check: returned unchanged to 1e-13",
+            Expected::Pass,
+            constant,
+        ),
+        c(
+            "one-by-one-grid",
+            "a 1 x 1 grid with 2 components (robust): nothing to smooth; check: the value is returned",
+            Expected::Pass,
+            one_by_one,
+        ),
+        c(
+            "order-7",
+            "penalty order 7 (allowed 1, 2, 3)",
+            Expected::ClearError(&["`order` = 7", "1, 2 or 3"]),
+            order_7,
+        ),
+        c(
+            "negative-weight",
+            "a weight of -0.5 at grid index 4",
+            Expected::ClearError(&["weight at grid index 4", "finite and ≥ 0"]),
+            negative_weight,
+        ),
+    ]
+}
+
+/// (cos 2πx sin πy, sin 2πx cos 1.5πy + 0.3) on an ny × nx grid, component-major.
+fn smooth_field(ny: usize, nx: usize) -> Vec<f64> {
+    let mut f = vec![0.0; 2 * ny * nx];
+    let (tau, pi) = (std::f64::consts::TAU, std::f64::consts::PI);
+    for i in 0..ny {
+        for j in 0..nx {
+            let (y, x) = (i as f64 / ny as f64, j as f64 / nx as f64);
+            f[i * nx + j] = (tau * x).cos() * (pi * y).sin();
+            f[ny * nx + i * nx + j] = (tau * x).sin() * (1.5 * pi * y).cos() + 0.3;
+        }
+    }
+    f
+}
+
+/// `truth` + N(0, σ²); then a fraction `outliers` of the points get uniform values in ±2.5.
+fn corrupt(truth: &[f64], components: usize, sigma: f64, outliers: f64, seed: u64) -> Result<Vec<f64>, String> {
+    let n = truth.len() / components;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let normal = Normal::new(0.0, sigma).msg()?;
+    let mut y: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
+    let mask: Vec<bool> = (0..n).map(|_| rng.gen_bool(outliers)).collect();
+    for p in (0..n).filter(|&p| mask[p]) {
+        for c in 0..components {
+            y[c * n + p] = rng.gen_range(-2.5..2.5);
+        }
+    }
+    Ok(y)
+}
+
+fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+fn robust() -> SmoothnParams {
+    SmoothnParams { robust: true, ..SmoothnParams::default() }
+}
+
+fn all_nan(_: &Ctx) -> CaseResult {
+    smoothn(&[f64::NAN; 60], &[5, 6], 2, None, &SmoothnParams::default())
+        .map(|_| Check::new(false, "returned a result from no data"))
+        .msg()
+}
+
+fn zero_weights(_: &Ctx) -> CaseResult {
+    smoothn(&[1.0; 60], &[5, 6], 2, Some(&[0.0; 30]), &SmoothnParams::default())
+        .map(|_| Check::new(false, "returned a result with every weight 0"))
+        .msg()
+}
+
+fn infinities(_: &Ctx) -> CaseResult {
+    let mut y_nan = corrupt(&smooth_field(16, 20), 2, 0.05, 0.0, 1)?;
+    let mut y_inf = y_nan.clone();
+    for (k, p) in [3usize, 77, 150, 151, 300].iter().enumerate() {
+        y_nan[*p] = f64::NAN;
+        y_inf[*p] = if k % 2 == 0 { f64::INFINITY } else { f64::NEG_INFINITY };
+    }
+    let (a, ra) = smoothn(&y_nan, &[16, 20], 2, None, &robust()).msg()?;
+    let (b, rb) = smoothn(&y_inf, &[16, 20], 2, None, &robust()).msg()?;
+    let same = a.len() == b.len() && a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()) && ra == rb;
+    let fin = a.iter().all(|v| v.is_finite());
+    Ok(Check::new(same && fin, format!("bit-identical: {same}, finite: {fin}, S = {:.3e}", ra.s)))
+}
+
+fn missing_90(_: &Ctx) -> CaseResult {
+    let (ny, nx) = (64, 64);
+    let n = ny * nx;
+    let truth = smooth_field(ny, nx);
+    let mut y = corrupt(&truth, 2, 0.05, 0.0, 12)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let mut missing = 0;
+    for p in 0..n {
+        if rng.gen_bool(0.9) {
+            y[p] = f64::NAN;
+            y[n + p] = f64::NAN;
+            missing += 1;
+        }
+    }
+    let (z, r) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
+    let fin = z.iter().all(|v| v.is_finite());
+    let e = rms_diff(&z, &truth);
+    Ok(Check::new(
+        r.converged && fin && e < 0.1,
+        format!(
+            "{:.1} % missing: RMS error {e:.4} (noise 0.05), converged {} after {} iterations, S = {:.3e}",
+            100.0 * missing as f64 / n as f64,
+            r.converged,
+            r.iterations,
+            r.s
+        ),
+    ))
+}
+
+fn outliers(_: &Ctx) -> CaseResult {
+    let (ny, nx) = (64, 64);
+    let truth = smooth_field(ny, nx);
+    let y = corrupt(&truth, 2, 0.1, 0.1, 11)?;
+    let clean = corrupt(&truth, 2, 0.1, 0.0, 11)?;
+    let (zc, _) = smoothn(&clean, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
+    let (z0, _) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
+    let (z, r) = smoothn(&y, &[ny, nx], 2, None, &robust()).msg()?;
+    let (ec, e0, e) = (rms_diff(&zc, &truth), rms_diff(&z0, &truth), rms_diff(&z, &truth));
+    Ok(Check::new(
+        e < 0.3 * e0 && e < 2.0 * ec && r.converged,
+        format!(
+            "RMS error robust {e:.4}, non-robust {e0:.4}, outlier-free {ec:.4}; {:.1} % flagged as outliers",
+            100.0 * r.outlier_fraction
+        ),
+    ))
+}
+
+fn scale_extremes(_: &Ctx) -> CaseResult {
+    let (ny, nx) = (32, 32);
+    let y = corrupt(&smooth_field(ny, nx), 2, 0.1, 0.0, 21)?;
+    let (z1, r1) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
+    let mut parts = vec![];
+    let mut ok = true;
+    for scale in [1e-100, 1e100] {
+        let ys: Vec<f64> = y.iter().map(|v| v * scale).collect();
+        let (zs, rs) = smoothn(&ys, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
+        let rel = zs.iter().zip(&z1).map(|(a, b)| (a / scale - b).abs()).fold(0.0, f64::max)
+            / z1.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let s_rel = (rs.s / r1.s - 1.0).abs();
+        ok &= rel.is_finite() && rel <= 1e-9 && s_rel <= 1e-9;
+        parts.push(format!("x{scale:e}: result off by {rel:.1e}, S off by {s_rel:.1e}"));
+    }
+    Ok(Check::new(ok, format!("S = {:.3e}; {}", r1.s, parts.join("; "))))
+}
+
+fn constant(_: &Ctx) -> CaseResult {
+    let (ny, nx) = (12, 17);
+    let n = ny * nx;
+    let y: Vec<f64> = (0..2 * n).map(|i| if i < n { 2.5 } else { -1.25 }).collect();
+    let mut worst: f64 = 0.0;
+    for p in [robust(), SmoothnParams { s: Some(1e3), ..SmoothnParams::default() }] {
+        let (z, r) = smoothn(&y, &[ny, nx], 2, None, &p).msg()?;
+        let d = z.iter().zip(&y).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        worst = if d.is_nan() || !(r.s.is_finite() && r.s > 0.0) { f64::NAN } else { worst.max(d) };
+    }
+    Ok(Check::new(worst < 1e-13, format!("largest change {worst:.1e}")))
+}
+
+fn one_by_one(_: &Ctx) -> CaseResult {
+    let (z, r) = smoothn(&[3.0, -2.0], &[1, 1], 2, None, &robust()).msg()?;
+    Ok(Check::new(z == [3.0, -2.0] && r.converged, format!("returned {z:?}, converged {}", r.converged)))
+}
+
+fn order_7(_: &Ctx) -> CaseResult {
+    smoothn(&[1.0, 2.0], &[2], 1, None, &SmoothnParams { order: 7, ..SmoothnParams::default() })
+        .map(|_| Check::new(true, "accepted order 7"))
+        .msg()
+}
+
+fn negative_weight(_: &Ctx) -> CaseResult {
+    let mut w = vec![1.0; 12];
+    w[4] = -0.5;
+    smoothn(&[0.0; 12], &[3, 4], 1, Some(&w), &SmoothnParams::default())
+        .map(|_| Check::new(true, "accepted a negative weight"))
+        .msg()
+}
