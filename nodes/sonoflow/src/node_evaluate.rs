@@ -84,6 +84,10 @@ pub struct Evaluation {
     pub label: String,
     pub margin: usize,
     pub packets: Vec<PacketEval>,
+    /// Per field, all packets pooled: the errors of every evaluated pixel of every packet (each
+    /// relative to its packet's v_max); `pixels`/`no_estimate` summed, `v_max` the largest.
+    #[serde(default)]
+    pub overall: BTreeMap<String, FieldError>,
     /// Figures written into `<run>/figures/` (paths relative to the run folder).
     #[serde(default)]
     pub figures: Vec<Figure>,
@@ -276,12 +280,15 @@ pub fn markdown(e: &Evaluation) -> String {
     );
     let _ = writeln!(s, "| packet | field | pixels | no estimate | v_max (m/s) | x: bias | x: RMS | x: \\|e\\|₇₅ | x: ≤ 10 % | z: bias | z: RMS | z: \\|e\\|₇₅ | z: ≤ 2 % |");
     let _ = writeln!(s, "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for p in &e.packets {
-        for (name, f) in &p.fields {
+    let rows = e.packets.iter().flat_map(|p| p.fields.iter().map(|(n, f)| (p.packet.to_string(), n, f)));
+    let all =
+        if e.packets.len() > 1 { e.overall.iter().map(|(n, f)| ("all".to_string(), n, f)).collect() } else { vec![] };
+    {
+        for (packet, name, f) in rows.chain(all) {
             let _ = writeln!(
                 s,
                 "| {} | {name} | {} | {} | {:.3} | {:+.1} % | {:.1} % | {:.1} % | {:.0} % | {:+.1} % | {:.1} % | {:.1} % | {:.0} % |",
-                p.packet,
+                packet,
                 f.pixels,
                 f.no_estimate,
                 f.v_max,
@@ -297,6 +304,23 @@ pub fn markdown(e: &Evaluation) -> String {
         }
     }
     s
+}
+
+/// Overall errors per field from the pooled samples (see [`Evaluation::overall`]).
+pub fn overall(pooled: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)>) -> BTreeMap<String, FieldError> {
+    pooled
+        .into_iter()
+        .map(|(name, (ex, ez, pixels, no_estimate, v_max))| {
+            let fe = FieldError {
+                pixels,
+                no_estimate,
+                v_max,
+                x: crate::evaluate::error_stats(&ex),
+                z: crate::evaluate::error_stats(&ez),
+            };
+            (name, fe)
+        })
+        .collect()
 }
 
 pub fn run(mut kit: Kit) -> anyhow::Result<()> {
@@ -341,6 +365,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let tag = if p.label.is_empty() { String::new() } else { format!(" [{}]", p.label) };
     let mut done: BTreeMap<u32, PacketEval> = BTreeMap::new();
     let mut fig = FigureData::default();
+    // per field: pooled x and z errors, pixels, pixels without estimate, largest v_max
+    let mut pooled_all: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)> = BTreeMap::new();
     let mut truth_eos = false;
     let mut est_eos = vec![false; est_in.len()];
     let mut maps_eos = maps_in.is_none();
@@ -401,6 +427,12 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 t_valid: truth.0.common.t_valid,
                 fields: BTreeMap::new(),
             });
+            {
+                let a = pooled_all.entry(key.1.clone()).or_default();
+                a.0.extend_from_slice(&ex);
+                a.1.extend_from_slice(&ez);
+                (a.2, a.3, a.4) = (a.2 + fe.pixels, a.3 + fe.no_estimate, a.4.max(fe.v_max));
+            }
             entry.fields.insert(key.1.clone(), fe);
             if p.figures {
                 let pooled = fig.samples.entry(key.1.clone()).or_default();
@@ -431,6 +463,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         eprintln!("evaluator: no ground truth for packet {pk} ({name}): not evaluated");
     }
     eval.packets = done.into_values().collect();
+    eval.overall = overall(pooled_all);
     if let Some(dir) = &kit.cfg.out_dir {
         let dir = std::path::Path::new(dir);
         if p.figures {
@@ -515,5 +548,48 @@ mod tests {
             fig.keep_map((DopplerMapHeaderV1 { packet: p, ..Default::default() }, Vec::new()));
         }
         assert_eq!(fig.maps.keys().copied().collect::<Vec<_>>(), [6, 7, 8, 9]);
+    }
+
+    #[test]
+    fn overall_pools_the_pixels_of_every_packet() {
+        let grid = GridV1 { x0: -0.005, z0: 0.01, dx: 0.25e-3, dz: 0.25e-3, nx: 21, nz: 21 };
+        let n = 21 * 21;
+        let mask: Vec<f32> = (0..n).map(|i: usize| if (i / 21).abs_diff(10) < 6 { 1.0 } else { 0.0 }).collect();
+        let vx: Vec<f32> = mask.iter().map(|m| 0.5 * m).collect();
+        let zero = vec![0.0f32; n];
+        let truth = |packet| {
+            field(grid, packet, &[(plane::VX, vx.clone()), (plane::VZ, zero.clone()), (plane::MASK, mask.clone())])
+        };
+        // packet 0 reads vx 1 % of v_max high everywhere, packet 1 3 % low
+        let mut pooled: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)> = BTreeMap::new();
+        let mut per_packet = Vec::new();
+        for (packet, off) in [(0u32, 0.005f32), (1, -0.015)] {
+            let est: Vec<f32> = vx.iter().map(|v| v + off).collect();
+            let e = field(grid, packet, &[(plane::VX, est), (plane::VZ, zero.clone())]);
+            let (fe, ex, ez) = evaluate_pair_samples(&truth(packet), &e, 2).unwrap();
+            let a = pooled.entry("raw".into()).or_default();
+            a.0.extend_from_slice(&ex);
+            a.1.extend_from_slice(&ez);
+            (a.2, a.3, a.4) = (a.2 + fe.pixels, a.3 + fe.no_estimate, a.4.max(fe.v_max));
+            per_packet.push(fe);
+        }
+        let one = overall(BTreeMap::from([("raw".to_string(), {
+            let (ex, ez, px, ne, vm) = &pooled["raw"];
+            let k = per_packet[0].pixels - per_packet[0].no_estimate;
+            (ex[..k].to_vec(), ez[..k].to_vec(), *px / 2, *ne / 2, *vm)
+        })]));
+        // one packet: exactly that packet's statistics
+        assert_eq!(one["raw"].x.abs_p75, per_packet[0].x.abs_p75);
+        assert_eq!(one["raw"].x.bias, per_packet[0].x.bias);
+        let all = overall(pooled);
+        let o = &all["raw"];
+        assert_eq!(o.pixels, per_packet[0].pixels + per_packet[1].pixels);
+        assert!(o.pixels > 100);
+        // equal pixel counts: the pooled bias is the mean of +1 % and −3 %, half the pixels within ±2 %
+        assert!((o.x.bias - (-0.01)).abs() < 1e-6, "{}", o.x.bias);
+        assert!((o.x.within_2pct - 0.5).abs() < 1e-9, "{}", o.x.within_2pct);
+        assert!((o.x.abs_p75 - 0.03).abs() < 1e-6, "{}", o.x.abs_p75);
+        let md = markdown(&Evaluation { packets: vec![], overall: all, ..Default::default() });
+        assert!(!md.contains("| all |"), "a single or no packet has no overall row");
     }
 }
