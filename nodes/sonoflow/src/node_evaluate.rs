@@ -306,8 +306,12 @@ pub fn markdown(e: &Evaluation) -> String {
     s
 }
 
+/// One field's errors pooled over packets: x and z errors of every evaluated pixel, pixels, pixels
+/// without estimate, the largest v_max.
+pub type Pooled = (Vec<f64>, Vec<f64>, usize, usize, f64);
+
 /// Overall errors per field from the pooled samples (see [`Evaluation::overall`]).
-pub fn overall(pooled: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)>) -> BTreeMap<String, FieldError> {
+pub fn overall(pooled: BTreeMap<String, Pooled>) -> BTreeMap<String, FieldError> {
     pooled
         .into_iter()
         .map(|(name, (ex, ez, pixels, no_estimate, v_max))| {
@@ -366,7 +370,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let mut done: BTreeMap<u32, PacketEval> = BTreeMap::new();
     let mut fig = FigureData::default();
     // per field: pooled x and z errors, pixels, pixels without estimate, largest v_max
-    let mut pooled_all: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)> = BTreeMap::new();
+    let mut pooled_all: BTreeMap<String, Pooled> = BTreeMap::new();
     let mut truth_eos = false;
     let mut est_eos = vec![false; est_in.len()];
     let mut maps_eos = maps_in.is_none();
@@ -561,7 +565,7 @@ mod tests {
             field(grid, packet, &[(plane::VX, vx.clone()), (plane::VZ, zero.clone()), (plane::MASK, mask.clone())])
         };
         // packet 0 reads vx 1 % of v_max high everywhere, packet 1 3 % low
-        let mut pooled: BTreeMap<String, (Vec<f64>, Vec<f64>, usize, usize, f64)> = BTreeMap::new();
+        let mut pooled: BTreeMap<String, Pooled> = BTreeMap::new();
         let mut per_packet = Vec::new();
         for (packet, off) in [(0u32, 0.005f32), (1, -0.015)] {
             let est: Vec<f32> = vx.iter().map(|v| v + off).collect();
