@@ -1,0 +1,8 @@
+//! Platelet suspension of paper 2 (`../shared/papers/fe-nn-platelet-suspensions.txt`): platelets
+//! as point particles with shape, whose drag, lift and torque come from small trained networks.
+//! This crate holds the algorithms without any IPC. So far: the shape model of section 4.1
+//! ([`shape`]).
+
+pub mod shape;
+
+pub use shape::{Shape, ShapeError, ShapeSampler};
