@@ -117,6 +117,56 @@ impl OpenChannelConfig {
         vec![mk("inlet", 0.0, -1.0, self.inflow.clone()), mk("outlet", self.length(), 1.0, self.inflow.scaled(-1.0))]
     }
 
+    /// The validation channel of the tests and the stability matrix: L = 2 mm, 20 spacings across
+    /// (dx = 0.1 mm), 4 mm between the openings, 3 wall layers, reservoirs 4 dx deep (support 3 dx
+    /// at h = 1.2 dx), ρ₀ = 1000 kg/m³, ν = 4e-6 m²/s (blood), Womersley profiles.
+    pub fn validation(inflow: crate::waveform::Waveform, developed: bool) -> Self {
+        OpenChannelConfig {
+            width: 2e-3,
+            n_across: 20,
+            n_along: 40,
+            wall_layers: 3,
+            reservoir_columns: 4,
+            rho0: 1000.0,
+            nu: 4e-6,
+            inflow,
+            profile: crate::boundary::ProfileKind::Womersley,
+            developed,
+        }
+    }
+
+    /// Solver parameters for this channel: h = 1.2 dx, its ρ₀ and μ = ρ₀ν, sound speed `c`, no
+    /// dt cap; the rest default.
+    pub fn solver_params(&self, c: Real) -> crate::params::SphParams {
+        crate::params::SphParams {
+            h: 1.2 * self.dx(),
+            rho0: self.rho0,
+            c,
+            mu: self.nu * self.rho0,
+            dt_max: 1.0,
+            ..Default::default()
+        }
+    }
+
+    /// Mean vx of the fluid particles of each lattice row j = 1 … n_across − 1 (|z − j dx| < dx/2)
+    /// in the middle half of the channel (0 for an empty row).
+    pub fn mid_profile(&self, p: &Particles) -> Vec<Real> {
+        let dx = self.dx();
+        let (lo, hi) = (0.25 * self.length(), 0.75 * self.length());
+        let mut sum = vec![0.0; self.n_across + 1];
+        let mut n = vec![0usize; self.n_across + 1];
+        for i in 0..p.len() {
+            if p.kind[i] == ParticleKind::Fluid && p.x[i] > lo && p.x[i] < hi {
+                let row = (p.z[i] / dx).round();
+                if row >= 1.0 && (row as usize) < self.n_across && (p.z[i] - row * dx).abs() < 0.5 * dx {
+                    sum[row as usize] += p.vx[i];
+                    n[row as usize] += 1;
+                }
+            }
+        }
+        (1..self.n_across).map(|r| sum[r] / n[r].max(1) as Real).collect()
+    }
+
     /// Builds fluid, walls and filled reservoirs; returns the particles and the boundaries.
     pub fn build(&self) -> (Particles, Vec<crate::boundary::OpenBoundary>) {
         let dx = self.dx();

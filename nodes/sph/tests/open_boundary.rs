@@ -3,7 +3,7 @@
 
 use sonoflow_sph::setup::OpenChannelConfig;
 use sonoflow_sph::womersley::profile_velocity;
-use sonoflow_sph::{ParticleKind, ProfileKind, Real, Solver, SphParams, Waveform, WaveformSpec};
+use sonoflow_sph::{ParticleKind, Real, Solver, SphParams, Waveform, WaveformSpec};
 use std::collections::HashSet;
 
 const RHO0: Real = 1000.0;
@@ -20,23 +20,10 @@ fn channel_with(
 ) -> (OpenChannelConfig, Solver) {
     // L = 2 mm, 20 across (dx = 0.1 mm), 4 mm between the openings, reservoirs 4 dx deep
     // (support 3 dx at h = 1.2 dx).
-    let cfg = OpenChannelConfig {
-        width: 2e-3,
-        n_across: 20,
-        n_along: 40,
-        wall_layers: 3,
-        reservoir_columns: 4,
-        rho0: RHO0,
-        nu: NU,
-        inflow,
-        profile: ProfileKind::Womersley,
-        developed,
-    };
-    let dx = cfg.dx();
+    let cfg = OpenChannelConfig::validation(inflow, developed);
     // mean 0.02 m/s (Re = 10); c from Morris' criterion with the pressure gradient 12 ν ū / L² ≈
     // 0.24 m/s² over L/δ: c ≥ 0.22 m/s; take 0.5 (Ma = 0.06).
-    let params =
-        SphParams { h: 1.2 * dx, rho0: RHO0, c: 0.5, mu: NU * RHO0, dt_max: 1.0, integrator, ..Default::default() };
+    let params = SphParams { integrator, ..cfg.solver_params(0.5) };
     let (p, bs) = cfg.build();
     let s = Solver::new(params, p, 0.0).expect("valid").with_open_boundaries(bs).expect("valid boundaries");
     (cfg, s)

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use sonoflow_sph::setup::{ChannelConfig, OpenChannelConfig};
 use sonoflow_sph::womersley::profile_velocity;
 use sonoflow_sph::{
-    BlowUpCriterion, Domain, DtCriterion, ParticleKind, Particles, Period, ProfileKind, Real, Solver, SphError,
-    SphParams, Waveform, WaveformSpec,
+    BlowUpCriterion, Domain, DtCriterion, ParticleKind, Particles, Period, Real, Solver, SphError, SphParams, Waveform,
+    WaveformSpec,
 };
 use std::f64::consts::PI;
 
@@ -16,50 +16,15 @@ const RHO0: Real = 1000.0;
 const NU: Real = 4e-6;
 
 fn open_channel(inflow: Waveform, c: Real, background_pressure: Real, developed: bool) -> (OpenChannelConfig, Solver) {
-    let cfg = OpenChannelConfig {
-        width: 2e-3,
-        n_across: 20,
-        n_along: 40,
-        wall_layers: 3,
-        reservoir_columns: 4,
-        rho0: RHO0,
-        nu: NU,
-        inflow,
-        profile: ProfileKind::Womersley,
-        developed,
-    };
-    let params = SphParams {
-        h: 1.2 * cfg.dx(),
-        rho0: RHO0,
-        c,
-        mu: NU * RHO0,
-        background_pressure,
-        dt_max: 1.0,
-        ..Default::default()
-    };
+    let cfg = OpenChannelConfig::validation(inflow, developed);
+    let params = SphParams { background_pressure, ..cfg.solver_params(c) };
     let (p, bs) = cfg.build();
     let s = Solver::new(params, p, 0.0).expect("valid").with_open_boundaries(bs).expect("valid");
     (cfg, s)
 }
 
-/// Row-binned mean vx of the fluid in the middle half of the channel, rows 1..n_across.
 fn mid_profile(s: &Solver, cfg: &OpenChannelConfig) -> Vec<Real> {
-    let dx = cfg.dx();
-    let p = &s.particles;
-    (1..cfg.n_across)
-        .map(|row| {
-            let z = row as Real * dx;
-            let (mut sum, mut n) = (0.0, 0usize);
-            for i in 0..p.len() {
-                let mid = p.x[i] > 0.25 * cfg.length() && p.x[i] < 0.75 * cfg.length();
-                if p.kind[i] == ParticleKind::Fluid && mid && (p.z[i] - z).abs() < 0.5 * dx {
-                    sum += p.vx[i];
-                    n += 1;
-                }
-            }
-            sum / n.max(1) as Real
-        })
-        .collect()
+    cfg.mid_profile(&s.particles)
 }
 
 #[test]

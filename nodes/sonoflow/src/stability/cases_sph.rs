@@ -5,8 +5,8 @@ use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use sonoflow_sph::setup::{ChannelConfig, OpenChannelConfig};
 use sonoflow_sph::womersley::profile_velocity;
 use sonoflow_sph::{
-    BlowUpCriterion, Domain, DtCriterion, ParticleKind, Particles, Period, ProfileKind, Real, Solver, SphError,
-    SphParams, Waveform, WaveformSpec,
+    BlowUpCriterion, Domain, DtCriterion, ParticleKind, Particles, Period, Real, Solver, SphError, SphParams, Waveform,
+    WaveformSpec,
 };
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -129,27 +129,8 @@ fn open_channel(
     background_pressure: Real,
     developed: bool,
 ) -> Result<(OpenChannelConfig, Solver), String> {
-    let cfg = OpenChannelConfig {
-        width: 2e-3,
-        n_across: 20,
-        n_along: 40,
-        wall_layers: 3,
-        reservoir_columns: 4,
-        rho0: RHO0,
-        nu: NU,
-        inflow,
-        profile: ProfileKind::Womersley,
-        developed,
-    };
-    let params = SphParams {
-        h: 1.2 * cfg.dx(),
-        rho0: RHO0,
-        c,
-        mu: NU * RHO0,
-        background_pressure,
-        dt_max: 1.0,
-        ..Default::default()
-    };
+    let cfg = OpenChannelConfig::validation(inflow, developed);
+    let params = SphParams { background_pressure, ..cfg.solver_params(c) };
     let (p, bs) = cfg.build();
     let s = Solver::new(params, p, 0.0).msg()?.with_open_boundaries(bs).msg()?;
     Ok((cfg, s))
@@ -157,21 +138,7 @@ fn open_channel(
 
 /// Row-binned mean vx of the fluid in the middle half of the channel, rows 1..n_across.
 fn mid_profile(s: &Solver, cfg: &OpenChannelConfig) -> Vec<Real> {
-    let dx = cfg.dx();
-    let p = &s.particles;
-    let (lo, hi) = (0.25 * cfg.length(), 0.75 * cfg.length());
-    let mut sum = vec![0.0; cfg.n_across + 1];
-    let mut n = vec![0usize; cfg.n_across + 1];
-    for i in 0..p.len() {
-        if p.kind[i] == ParticleKind::Fluid && p.x[i] > lo && p.x[i] < hi {
-            let row = (p.z[i] / dx).round();
-            if row >= 1.0 && (row as usize) < cfg.n_across && (p.z[i] - row * dx).abs() < 0.5 * dx {
-                sum[row as usize] += p.vx[i];
-                n[row as usize] += 1;
-            }
-        }
-    }
-    (1..cfg.n_across).map(|r| sum[r] / n[r].max(1) as Real).collect()
+    cfg.mid_profile(&s.particles)
 }
 
 /// max |profile − exact(z)| / scale over the rows (NaN-propagating: a NaN gives NaN).
