@@ -3,6 +3,8 @@
 //! This crate holds the algorithms without any IPC. So far: the shape model of section 4.1
 //! ([`shape`]).
 
+pub mod coefficients;
 pub mod shape;
 
+pub use coefficients::{CoefficientModel, Rotational, Translational};
 pub use shape::{Shape, ShapeError, ShapeSampler};
