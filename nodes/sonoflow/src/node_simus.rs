@@ -64,6 +64,10 @@ pub struct SimusNodeParams {
     pub plan: NodePlan,
     /// Extra distance (m) the per-packet plan allows for scatterers moving during a packet.
     pub plan_margin: f64,
+    /// Transmit apodisation: Tukey window over the elements with this taper fraction, in
+    /// [0, 1] (0 = rectangular, MUST's default; 1 = Hann). A taper weakens the edge waves of the
+    /// plane wave.
+    pub tx_tukey: f64,
 }
 
 impl Default for SimusNodeParams {
@@ -76,6 +80,7 @@ impl Default for SimusNodeParams {
             prf: 10e3,
             plan: NodePlan::PerPacket,
             plan_margin: 2e-3,
+            tx_tukey: 0.0,
         }
     }
 }
@@ -100,12 +105,18 @@ impl SimusNodeParams {
         if self.tilts_deg.is_empty() || self.tilts_deg.len() > 64 {
             return Err(format!("tilts_deg has {} entries: 1 ..= 64 allowed", self.tilts_deg.len()));
         }
+        if !(self.tx_tukey.is_finite() && (0.0..=1.0).contains(&self.tx_tukey)) {
+            return Err(format!("tx_tukey = {} is out of range: 0 ..= 1", self.tx_tukey));
+        }
         let mut transmits = Vec::new();
         for (i, t) in self.tilts_deg.iter().enumerate() {
             if !(t.is_finite() && t.abs() < 90.0) {
                 return Err(format!("tilts_deg[{i}] = {t} is out of range: (-90, 90) degrees"));
             }
-            let tx = Transmit::plane_wave(&probe, self.medium.c, t.to_radians()).map_err(|e| e.to_string())?;
+            let mut tx = Transmit::plane_wave(&probe, self.medium.c, t.to_radians()).map_err(|e| e.to_string())?;
+            if self.tx_tukey > 0.0 {
+                tx.apodization = tukey(probe.n_elements, self.tx_tukey);
+            }
             transmits.push((t.to_radians(), tx));
         }
         if !(self.prf.is_finite() && self.prf > 0.0 && self.prf <= 1e7) {
@@ -116,6 +127,21 @@ impl SimusNodeParams {
         }
         Ok(Setup { probe, transmits })
     }
+}
+
+/// Tukey window of `n` points with taper fraction `r` in (0, 1] (1 = Hann).
+pub fn tukey(n: usize, r: f64) -> Vec<f64> {
+    (0..n)
+        .map(|i| {
+            let u = if n > 1 { i as f64 / (n - 1) as f64 } else { 0.5 };
+            let d = u.min(1.0 - u);
+            if d >= r / 2.0 {
+                1.0
+            } else {
+                0.5 * (1.0 - (std::f64::consts::PI * 2.0 * d / r).cos())
+            }
+        })
+        .collect()
 }
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
