@@ -47,7 +47,11 @@ impl Dataset {
             });
         }
         if targets.len() != n * n_outputs {
-            return Err(NnError::Size { what: "data set target entries".into(), expected: n * n_outputs, got: targets.len() });
+            return Err(NnError::Size {
+                what: "data set target entries".into(),
+                expected: n * n_outputs,
+                got: targets.len(),
+            });
         }
         for (what, v) in [("data set inputs", &inputs), ("data set targets", &targets)] {
             if let Some(index) = v.iter().position(|x| !x.is_finite()) {
@@ -227,7 +231,9 @@ impl TrainingReport {
     pub fn to_markdown(&self) -> String {
         let sizes: Vec<String> = self.sizes.iter().map(ToString::to_string).collect();
         let mut s = String::new();
-        for (title, rms) in [("relative error |ŷ − y| / |y|", false), ("error relative to the set's RMS |ŷ − y| / rms(y)", true)] {
+        for (title, rms) in
+            [("relative error |ŷ − y| / |y|", false), ("error relative to the set's RMS |ŷ − y| / rms(y)", true)]
+        {
             let _ = writeln!(s, "{} ({}), {title}, %:\n", self.network, sizes.join("-"));
             let mut head = String::from("| output |");
             let mut rule = String::from("|---|");
@@ -324,8 +330,9 @@ mod tests {
     #[test]
     fn errors_follow_their_definitions() {
         // identity network: ŷ = x; targets y, predictions x
-        let net = Mlp::from_parts(vec![1, 1], vec![vec![1.0]], vec![vec![0.0]], vec![0.0], vec![1.0], vec![0.0], vec![1.0])
-            .expect("valid");
+        let net =
+            Mlp::from_parts(vec![1, 1], vec![vec![1.0]], vec![vec![0.0]], vec![0.0], vec![1.0], vec![0.0], vec![1.0])
+                .expect("valid");
         let y = [1.0, -2.0, 4.0, 0.5];
         let p = [1.1, -2.0, 3.0, 0.5];
         let d = Dataset::new(1, 1, p.to_vec(), y.to_vec()).expect("valid");

@@ -155,11 +155,7 @@ impl Mlp {
             });
         }
         if let Some(k) = output_scale.iter().position(|&s| s == 0.0) {
-            return Err(NnError::Config {
-                field: "output_scale",
-                value: format!("0 (output {k})"),
-                allowed: "!= 0",
-            });
+            return Err(NnError::Config { field: "output_scale", value: format!("0 (output {k})"), allowed: "!= 0" });
         }
         let mut mlp = Mlp {
             sizes,
@@ -411,9 +407,10 @@ impl Mlp {
         check_len("forward: input entries (multiple of the input size)", n * n_in, inputs.len())?;
         check_len("forward: output entries", n * n_out, outputs.len())?;
         const CHUNK: usize = 16 * TILE;
-        inputs.par_chunks(CHUNK * n_in).zip(outputs.par_chunks_mut(CHUNK * n_out)).try_for_each(|(x, y)| {
-            with_thread_workspace(|ws| self.forward_batch(x, y, ws))
-        })
+        inputs
+            .par_chunks(CHUNK * n_in)
+            .zip(outputs.par_chunks_mut(CHUNK * n_out))
+            .try_for_each(|(x, y)| with_thread_workspace(|ws| self.forward_batch(x, y, ws)))
     }
 }
 
@@ -517,8 +514,16 @@ mod tests {
         assert!(e.to_string().contains("input_std"), "{e}");
         let mut w = m.weights.clone();
         w[1][3] = f64::NAN;
-        let e = Mlp::from_parts(m.sizes.clone(), w, m.biases.clone(), vec![0.0; 6], vec![1.0; 6], vec![0.0; 3], vec![1.0; 3])
-            .expect_err("NaN weight");
+        let e = Mlp::from_parts(
+            m.sizes.clone(),
+            w,
+            m.biases.clone(),
+            vec![0.0; 6],
+            vec![1.0; 6],
+            vec![0.0; 3],
+            vec![1.0; 3],
+        )
+        .expect_err("NaN weight");
         assert!(e.to_string().contains("layer 1 weights") && e.to_string().contains("index 3"), "{e}");
         let e = Mlp::he_init(&[6], 1).expect_err("one layer size");
         assert!(e.to_string().contains("sizes"), "{e}");

@@ -252,8 +252,16 @@ mod tests {
         w[6 + 5] = 1.0; // l ← ψ
         w[12 + 3] = 1.0; // t_p ← α_top − 2 α_bot
         w[12 + 4] = -2.0;
-        Mlp::from_parts(vec![6, 3], vec![w], vec![vec![0.0, 0.0, 0.5]], vec![0.0; 6], vec![1.0; 6], vec![0.0; 3], vec![1.0; 3])
-            .expect("valid")
+        Mlp::from_parts(
+            vec![6, 3],
+            vec![w],
+            vec![vec![0.0, 0.0, 0.5]],
+            vec![0.0; 6],
+            vec![1.0; 6],
+            vec![0.0; 3],
+            vec![1.0; 3],
+        )
+        .expect("valid")
     }
 
     /// 5 → 2 → 1: t = Σ c_k x_k + c0 through a ReLU unit (the sum is positive for these tests).
@@ -273,8 +281,12 @@ mod tests {
     }
 
     fn model() -> NetworkModel {
-        NetworkModel::new(picking_n(), linear_5([0.1, 1.0, 0.1, 0.0, 0.0], 0.2), linear_5([0.0, 0.0, 0.0, 0.5, 0.25], 0.0))
-            .expect("sizes fit")
+        NetworkModel::new(
+            picking_n(),
+            linear_5([0.1, 1.0, 0.1, 0.0, 0.0], 0.2),
+            linear_5([0.0, 0.0, 0.0, 0.5, 0.25], 0.0),
+        )
+        .expect("sizes fit")
     }
 
     #[test]
@@ -354,7 +366,14 @@ mod tests {
     #[test]
     fn parallel_and_serial_evaluation_agree_bit_for_bit() {
         let n = Mlp::he_init(&[6, 50, 20, 20, 3], 1)
-            .and_then(|m| m.with_normalisation(vec![3.0, 0.5, 3.0, 1.0, 1.0, PI], vec![0.3, 0.2, 0.3, 0.4, 0.4, 1.8], vec![1.0, 1.0, 0.1], vec![0.1, 0.1, 0.1]))
+            .and_then(|m| {
+                m.with_normalisation(
+                    vec![3.0, 0.5, 3.0, 1.0, 1.0, PI],
+                    vec![0.3, 0.2, 0.3, 0.4, 0.4, 1.8],
+                    vec![1.0, 1.0, 0.1],
+                    vec![0.1, 0.1, 0.1],
+                )
+            })
             .expect("valid");
         let nr = Mlp::he_init(&[5, 20, 20, 20, 1], 2).expect("valid");
         let ns = Mlp::he_init(&[5, 20, 20, 20, 1], 3).expect("valid");

@@ -57,7 +57,10 @@ pub struct Tensor {
 const MAX_HEADER: u64 = 100_000_000;
 
 /// The safetensors bytes of `tensors` and `metadata` (tensors stored in name order).
-pub fn write_bytes(tensors: &BTreeMap<String, Tensor>, metadata: &BTreeMap<String, String>) -> Result<Vec<u8>, NnError> {
+pub fn write_bytes(
+    tensors: &BTreeMap<String, Tensor>,
+    metadata: &BTreeMap<String, String>,
+) -> Result<Vec<u8>, NnError> {
     let mut header = serde_json::Map::new();
     let mut offset = 0usize;
     for (name, t) in tensors {
@@ -66,7 +69,11 @@ pub fn write_bytes(tensors: &BTreeMap<String, Tensor>, metadata: &BTreeMap<Strin
             return Err(NnError::Tensor {
                 path: "<memory>".into(),
                 tensor: name.clone(),
-                reason: format!("shape {:?} holds {numel} values, data has {} (or a reserved name)", t.shape, t.data.len()),
+                reason: format!(
+                    "shape {:?} holds {numel} values, data has {} (or a reserved name)",
+                    t.shape,
+                    t.data.len()
+                ),
             });
         }
         let end = offset + numel * t.dtype.size();
@@ -100,7 +107,8 @@ pub fn write_bytes(tensors: &BTreeMap<String, Tensor>, metadata: &BTreeMap<Strin
 /// Parses and validates safetensors `bytes` (`path` names the file in errors).
 pub fn read_bytes(bytes: &[u8], path: &str) -> Result<(BTreeMap<String, Tensor>, BTreeMap<String, String>), NnError> {
     let format = |reason: String| NnError::Format { path: path.into(), reason };
-    let tensor_err = |tensor: &str, reason: String| NnError::Tensor { path: path.into(), tensor: tensor.into(), reason };
+    let tensor_err =
+        |tensor: &str, reason: String| NnError::Tensor { path: path.into(), tensor: tensor.into(), reason };
     let len_bytes: [u8; 8] = bytes
         .get(..8)
         .and_then(|b| b.try_into().ok())
@@ -167,7 +175,12 @@ pub fn read_bytes(bytes: &[u8], path: &str) -> Result<(BTreeMap<String, Tensor>,
         if numel.checked_mul(dtype.size()) != Some(end - begin) {
             return Err(tensor_err(
                 name,
-                format!("shape {shape:?} of {} needs {numel} × {} bytes, data_offsets give {}", dtype.name(), dtype.size(), end - begin),
+                format!(
+                    "shape {shape:?} of {} needs {numel} × {} bytes, data_offsets give {}",
+                    dtype.name(),
+                    dtype.size(),
+                    end - begin
+                ),
             ));
         }
         let raw = &buffer[begin..end];
@@ -205,7 +218,10 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> NnError + '_ {
 impl Mlp {
     /// The tensors and metadata of this network (module doc); `extra` metadata entries are added
     /// (they may not replace the reserved keys).
-    pub fn to_tensors(&self, extra: &[(&str, &str)]) -> Result<(BTreeMap<String, Tensor>, BTreeMap<String, String>), NnError> {
+    pub fn to_tensors(
+        &self,
+        extra: &[(&str, &str)],
+    ) -> Result<(BTreeMap<String, Tensor>, BTreeMap<String, String>), NnError> {
         let mut t = BTreeMap::new();
         let f64t = |shape: Vec<usize>, data: &[f64]| Tensor { shape, dtype: Dtype::F64, data: data.to_vec() };
         for l in 0..self.n_layers() {
@@ -222,9 +238,15 @@ impl Mlp {
             m.insert(k.to_string(), v.to_string());
         }
         let sizes: Vec<String> = self.sizes().iter().map(ToString::to_string).collect();
-        for (k, v) in [("format", "sonoflow-mlp"), ("version", "1"), ("activation", "relu"), ("sizes", &sizes.join(","))] {
+        for (k, v) in
+            [("format", "sonoflow-mlp"), ("version", "1"), ("activation", "relu"), ("sizes", &sizes.join(","))]
+        {
             if m.insert(k.to_string(), v.to_string()).is_some() {
-                return Err(NnError::Config { field: "metadata", value: k.to_string(), allowed: "keys other than format, version, activation, sizes" });
+                return Err(NnError::Config {
+                    field: "metadata",
+                    value: k.to_string(),
+                    allowed: "keys other than format, version, activation, sizes",
+                });
             }
         }
         Ok((t, m))
@@ -274,7 +296,11 @@ impl Mlp {
                 });
             }
             if let Some(i) = t.data.iter().position(|v| !v.is_finite()) {
-                return Err(NnError::Tensor { path: path.into(), tensor: name, reason: format!("value {} at index {i} is not finite", t.data[i]) });
+                return Err(NnError::Tensor {
+                    path: path.into(),
+                    tensor: name,
+                    reason: format!("value {} at index {i} is not finite", t.data[i]),
+                });
             }
             used += 1;
             Ok(t.data.clone())
@@ -325,7 +351,14 @@ mod tests {
 
     fn net() -> Mlp {
         Mlp::he_init(&[5, 20, 20, 20, 1], 4)
-            .and_then(|m| m.with_normalisation(vec![3.0, 0.5, 3.0, 1.0, 1.0], vec![0.3, 0.2, 0.3, 0.4, 0.4], vec![1.5], vec![0.25]))
+            .and_then(|m| {
+                m.with_normalisation(
+                    vec![3.0, 0.5, 3.0, 1.0, 1.0],
+                    vec![0.3, 0.2, 0.3, 0.4, 0.4],
+                    vec![1.5],
+                    vec![0.25],
+                )
+            })
             .expect("valid")
     }
 

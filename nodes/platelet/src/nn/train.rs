@@ -70,7 +70,11 @@ impl TrainConfig {
             && self.final_learning_rate >= 0.0
             && self.final_learning_rate <= self.learning_rate)
         {
-            return bad("final_learning_rate", self.final_learning_rate.to_string(), "0 <= final_learning_rate <= learning_rate");
+            return bad(
+                "final_learning_rate",
+                self.final_learning_rate.to_string(),
+                "0 <= final_learning_rate <= learning_rate",
+            );
         }
         if !(0.0..=0.5).contains(&self.validation_fraction) {
             return bad("validation_fraction", self.validation_fraction.to_string(), "0 <= validation_fraction <= 0.5");
@@ -194,7 +198,11 @@ fn loss_of(net: &Mlp, xs: &[f64], ts: &[f64], idx: &[usize], s: &mut Scratch) ->
     let mut sq = 0.0;
     for &i in idx {
         net.forward_raw_f64(&xs[i * n_in..(i + 1) * n_in], &mut s.acts);
-        sq += s.acts[net.n_layers()].iter().zip(&ts[i * n_out..(i + 1) * n_out]).map(|(y, t)| (y - t).powi(2)).sum::<f64>();
+        sq += s.acts[net.n_layers()]
+            .iter()
+            .zip(&ts[i * n_out..(i + 1) * n_out])
+            .map(|(y, t)| (y - t).powi(2))
+            .sum::<f64>();
     }
     sq / (idx.len().max(1) * n_out) as f64
 }
@@ -215,7 +223,8 @@ impl Adam {
         let c1 = 1.0 - B1.powi(self.step);
         let c2 = 1.0 - B2.powi(self.step);
         let params = net.weights.iter_mut().chain(net.biases.iter_mut());
-        let moments = self.m.w.iter_mut().chain(self.m.b.iter_mut()).zip(self.v.w.iter_mut().chain(self.v.b.iter_mut()));
+        let moments =
+            self.m.w.iter_mut().chain(self.m.b.iter_mut()).zip(self.v.w.iter_mut().chain(self.v.b.iter_mut()));
         let grads = g.w.iter().chain(g.b.iter());
         for ((p, (m, v)), g) in params.zip(moments).zip(grads) {
             for (((p, m), v), &g) in p.iter_mut().zip(m.iter_mut()).zip(v.iter_mut()).zip(g) {
@@ -291,7 +300,8 @@ pub fn train(sizes: &[usize], data: &Dataset, cfg: &TrainConfig) -> Result<(Mlp,
         for batch in train_idx.chunks(cfg.batch_size) {
             g.clear();
             for &i in batch {
-                epoch_sq += accumulate(&net, &xs[i * n_in..(i + 1) * n_in], &ts[i * n_out..(i + 1) * n_out], &mut s, &mut g);
+                epoch_sq +=
+                    accumulate(&net, &xs[i * n_in..(i + 1) * n_in], &ts[i * n_out..(i + 1) * n_out], &mut s, &mut g);
             }
             let scale = 2.0 / (batch.len() * n_out) as f64;
             g.w.iter_mut().chain(g.b.iter_mut()).flatten().for_each(|v| *v *= scale);
@@ -356,7 +366,10 @@ mod tests {
                     }
                     let fd = (loss_and_gradient(&plus, &xs, &ts).0 - loss_and_gradient(&minus, &xs, &ts).0) / (2.0 * h);
                     let an = if is_bias { g.b[l][k] } else { g.w[l][k] };
-                    assert!((fd - an).abs() <= 1e-6 * (1.0 + an.abs()), "layer {l} bias {is_bias} index {k}: fd {fd} vs {an}");
+                    assert!(
+                        (fd - an).abs() <= 1e-6 * (1.0 + an.abs()),
+                        "layer {l} bias {is_bias} index {k}: fd {fd} vs {an}"
+                    );
                     checked += 1;
                 }
             }
@@ -378,8 +391,19 @@ mod tests {
     /// a cos²ψ + b sin²ψ, over eq 18's factor, with a, b smooth in the shape.
     pub(crate) fn eq18_like(x: &[f64]) -> f64 {
         let (lx, ly, lz, at, ab, psi) = (x[0], x[1], x[2], x[3], x[4], x[5]);
-        let a = 78.0 * (1.0 + 0.08 * (lx - 3.0) + 0.05 * (lz - 3.0) + 0.3 * (ly - 0.5) + 0.04 * (at - 1.0) + 0.02 * (ab * ab - 1.0));
-        let b = 62.0 * (1.0 + 0.12 * (lx - 3.0) + 0.09 * (lz - 3.0) + 0.1 * (ly - 0.5) * (ly - 0.5) + 0.05 * (at + ab - 2.0).sin());
+        let a = 78.0
+            * (1.0
+                + 0.08 * (lx - 3.0)
+                + 0.05 * (lz - 3.0)
+                + 0.3 * (ly - 0.5)
+                + 0.04 * (at - 1.0)
+                + 0.02 * (ab * ab - 1.0));
+        let b = 62.0
+            * (1.0
+                + 0.12 * (lx - 3.0)
+                + 0.09 * (lz - 3.0)
+                + 0.1 * (ly - 0.5) * (ly - 0.5)
+                + 0.05 * (at + ab - 2.0).sin());
         ((a + b) / 2.0 - (a - b) / 2.0 * (2.0 * psi).cos()) / (70.0 - 10.0 * (2.0 * psi).cos())
     }
 
@@ -387,7 +411,8 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let lo = [2.5, 0.15, 2.5, 0.2, 0.2, 0.0];
         let hi = [3.5, 1.0, 3.5, 2.0, 2.0, 2.0 * std::f64::consts::PI];
-        let inputs: Vec<f64> = (0..n).flat_map(|_| (0..6).map(|k| rng.gen_range(lo[k]..hi[k])).collect::<Vec<_>>()).collect();
+        let inputs: Vec<f64> =
+            (0..n).flat_map(|_| (0..6).map(|k| rng.gen_range(lo[k]..hi[k])).collect::<Vec<_>>()).collect();
         let targets = inputs.chunks_exact(6).map(eq18_like).collect();
         Dataset::new(6, 1, inputs, targets).expect("finite data")
     }
