@@ -440,7 +440,8 @@ mod tests {
         m
     }
 
-    /// Naive reference: the formula of the module doc, written out in f64.
+    /// Naive reference: the formula of the module doc, written out in f64 with indices.
+    #[allow(clippy::needless_range_loop)]
     fn reference(m: &Mlp, x: &[f64]) -> Vec<f64> {
         let mut a: Vec<f64> = x.iter().enumerate().map(|(k, v)| (v - m.input_mean()[k]) / m.input_std()[k]).collect();
         for l in 0..m.n_layers() {

@@ -53,6 +53,9 @@ pub struct Tensor {
     pub data: Vec<f64>,
 }
 
+/// The tensors of a file by name, and its metadata.
+pub type TensorFile = (BTreeMap<String, Tensor>, BTreeMap<String, String>);
+
 /// Largest header accepted (the format's reference implementation uses 100 MB).
 const MAX_HEADER: u64 = 100_000_000;
 
@@ -87,9 +90,8 @@ pub fn write_bytes(
         header.insert("__metadata__".into(), serde_json::json!(metadata));
     }
     let mut json = serde_json::Value::Object(header).to_string().into_bytes();
-    while json.len() % 8 != 0 {
-        json.push(b' ');
-    }
+    let padding = (8 - json.len() % 8) % 8;
+    json.resize(json.len() + padding, b' ');
     let mut out = Vec::with_capacity(8 + json.len() + offset);
     out.extend_from_slice(&(json.len() as u64).to_le_bytes());
     out.extend_from_slice(&json);
@@ -105,7 +107,7 @@ pub fn write_bytes(
 }
 
 /// Parses and validates safetensors `bytes` (`path` names the file in errors).
-pub fn read_bytes(bytes: &[u8], path: &str) -> Result<(BTreeMap<String, Tensor>, BTreeMap<String, String>), NnError> {
+pub fn read_bytes(bytes: &[u8], path: &str) -> Result<TensorFile, NnError> {
     let format = |reason: String| NnError::Format { path: path.into(), reason };
     let tensor_err =
         |tensor: &str, reason: String| NnError::Tensor { path: path.into(), tensor: tensor.into(), reason };
@@ -218,10 +220,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> NnError + '_ {
 impl Mlp {
     /// The tensors and metadata of this network (module doc); `extra` metadata entries are added
     /// (they may not replace the reserved keys).
-    pub fn to_tensors(
-        &self,
-        extra: &[(&str, &str)],
-    ) -> Result<(BTreeMap<String, Tensor>, BTreeMap<String, String>), NnError> {
+    pub fn to_tensors(&self, extra: &[(&str, &str)]) -> Result<TensorFile, NnError> {
         let mut t = BTreeMap::new();
         let f64t = |shape: Vec<usize>, data: &[f64]| Tensor { shape, dtype: Dtype::F64, data: data.to_vec() };
         for l in 0..self.n_layers() {
@@ -382,9 +381,7 @@ mod tests {
     fn with_header(b: &[u8], h: &str) -> Vec<u8> {
         let n = u64::from_le_bytes(b[..8].try_into().expect("8 bytes")) as usize;
         let mut h = h.as_bytes().to_vec();
-        while h.len() % 8 != 0 {
-            h.push(b' ');
-        }
+        h.resize(h.len() + (8 - h.len() % 8) % 8, b' ');
         let mut out = (h.len() as u64).to_le_bytes().to_vec();
         out.extend_from_slice(&h);
         out.extend_from_slice(&b[8 + n..]);

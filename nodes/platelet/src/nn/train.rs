@@ -272,7 +272,7 @@ pub fn train(sizes: &[usize], data: &Dataset, cfg: &TrainConfig) -> Result<(Mlp,
     let (xs, ts) = standardised(&net, data);
     let (n_in, n_out) = (net.n_inputs(), net.n_outputs());
 
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5EED_0F_DA7A);
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5EED_F00D_DA7A);
     let mut order: Vec<usize> = (0..data.len()).collect();
     order.shuffle(&mut rng);
     let n_val = ((cfg.validation_fraction * data.len() as f64).round() as usize).min(data.len() - 1);
