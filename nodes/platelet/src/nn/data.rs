@@ -346,4 +346,34 @@ mod tests {
         let bad = Dataset::new(1, 1, vec![1.0, f64::NAN], vec![1.0, 2.0]).expect_err("NaN input");
         assert!(bad.to_string().contains("inputs") && bad.to_string().contains("index 1"), "{bad}");
     }
+
+    #[test]
+    fn report_has_table_1_layout_and_the_errors_of_the_split() {
+        let data = crate::nn::train::tests::eq18_like_data(300, 1);
+        let gen = crate::nn::train::tests::eq18_like_data(50, 2);
+        let cfg = TrainConfig { epochs: 5, seed: 4, ..Default::default() };
+        let (net, r) = train_and_report("N", &[6, 8, 1], &["d"], &data, Some(&gen), 0.2, &cfg).expect("valid");
+        let names: Vec<(&str, usize)> = r.sets.iter().map(|s| (s.set.as_str(), s.n)).collect();
+        assert_eq!(names, [("training", 240), ("test", 60), ("generalisation", 50)]);
+        // the test errors are those of the same seeded split, recomputed
+        let (_, te) = data.split(0.2, 4).expect("valid");
+        assert_eq!(r.sets[1].per_output, evaluate(&net, &te).expect("sizes match"));
+        let md = r.to_markdown();
+        assert!(md.contains("| output | training avg | training max | test avg | test max | generalisation avg | generalisation max |"), "{md}");
+        let e: Vec<ErrorStats> = r.sets.iter().map(|s| s.per_output[0]).collect();
+        let row = format!(
+            "| d | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            e[0].mean_rel_pct,
+            e[0].max_rel_pct,
+            e[1].mean_rel_pct,
+            e[1].max_rel_pct,
+            e[2].mean_rel_pct,
+            e[2].max_rel_pct
+        );
+        assert!(md.contains(&row), "{row}\n{md}");
+        let row = format!("| d | {:.2} | {:.2} |", e[0].mean_rms_pct, e[0].max_rms_pct);
+        assert!(md.contains(&row), "{md}");
+        assert!(serde_json::to_string(&r).expect("serialisable").contains("\"generalisation\""));
+        assert!(train_and_report("N", &[6, 8, 1], &["d", "l"], &data, None, 0.2, &cfg).is_err());
+    }
 }

@@ -24,7 +24,7 @@ pub mod model;
 pub mod safetensors;
 pub mod train;
 
-pub use data::{evaluate, Dataset, ErrorStats, SetErrors, TrainingReport};
+pub use data::{evaluate, train_and_report, Dataset, ErrorStats, SetErrors, TrainingReport};
 pub use mlp::{Mlp, MlpWorkspace};
 pub use model::NetworkModel;
 pub use train::{train, TrainConfig, TrainOutcome};

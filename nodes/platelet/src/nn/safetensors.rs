@@ -450,5 +450,10 @@ mod tests {
         let begin = v["input.std"]["data_offsets"][0].as_u64().expect("offset") as usize;
         zero_std[n + begin..n + begin + 8].copy_from_slice(&0.0f64.to_le_bytes());
         assert!(msg(&zero_std).contains("input_std"));
+        // two tensors on the same bytes
+        let off = v["input.std"]["data_offsets"].to_string();
+        let mean_off = v["input.mean"]["data_offsets"].to_string();
+        let m = msg(&with_header(&good, &h.replacen(&mean_off, &off, 1)));
+        assert!(m.contains("without gaps or overlaps"), "{m}");
     }
 }

@@ -330,7 +330,7 @@ pub fn train(sizes: &[usize], data: &Dataset, cfg: &TrainConfig) -> Result<(Mlp,
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::Rng;
 
