@@ -40,10 +40,10 @@ impl Dataset {
         }
         let n = inputs.len() / n_inputs;
         if n * n_inputs != inputs.len() {
-            return Err(NnError::Size {
-                what: "data set input entries (a multiple of n_inputs)".into(),
-                expected: (n + 1) * n_inputs,
-                got: inputs.len(),
+            return Err(NnError::Config {
+                field: "inputs",
+                value: format!("{} entries", inputs.len()),
+                allowed: "a whole number of rows of n_inputs entries",
             });
         }
         if targets.len() != n * n_outputs {

@@ -280,7 +280,7 @@ impl Mlp {
         if sizes.len() < 2 || sizes.iter().any(|&n| n == 0 || n > 4096) {
             return Err(format(format!("metadata sizes = `{sizes_s}`: need >= 2 sizes in 1..=4096")));
         }
-        let mut used = 0;
+        let mut used = std::collections::BTreeSet::new();
         let mut get = |name: String, shape: Vec<usize>| -> Result<Vec<f64>, NnError> {
             let t = tensors.get(&name).ok_or_else(|| NnError::Tensor {
                 path: path.into(),
@@ -301,7 +301,7 @@ impl Mlp {
                     reason: format!("value {} at index {i} is not finite", t.data[i]),
                 });
             }
-            used += 1;
+            used.insert(name);
             Ok(t.data.clone())
         };
         let layers = sizes.len() - 1;
@@ -316,15 +316,9 @@ impl Mlp {
         let is = get("input.std".into(), vec![n_in])?;
         let om = get("output.mean".into(), vec![n_out])?;
         let os = get("output.scale".into(), vec![n_out])?;
-        if used != tensors.len() {
-            let extra: Vec<&String> = tensors
-                .keys()
-                .filter(|k| !(k.starts_with("layers.") || k.starts_with("input.") || k.starts_with("output.")))
-                .collect();
-            return Err(format(format!(
-                "{} tensors, {used} expected for sizes {sizes_s} (unexpected: {extra:?})",
-                tensors.len()
-            )));
+        let extra: Vec<&String> = tensors.keys().filter(|k| !used.contains(*k)).collect();
+        if !extra.is_empty() {
+            return Err(format(format!("unexpected tensors {extra:?} for sizes {sizes_s}")));
         }
         Mlp::from_parts(sizes, w, b, im, is, om, os).map_err(|e| format(e.to_string()))
     }
@@ -455,5 +449,10 @@ mod tests {
         let mean_off = v["input.mean"]["data_offsets"].to_string();
         let m = msg(&with_header(&good, &h.replacen(&mean_off, &off, 1)));
         assert!(m.contains("without gaps or overlaps"), "{m}");
+        // a tensor the architecture does not have
+        let (mut t, meta) = net().to_tensors(&[]).expect("valid");
+        t.insert("layers.9.weight".into(), Tensor { shape: vec![1], dtype: Dtype::F32, data: vec![0.0] });
+        let m = msg(&write_bytes(&t, &meta).expect("valid"));
+        assert!(m.contains("unexpected tensors [\"layers.9.weight\"]"), "{m}");
     }
 }

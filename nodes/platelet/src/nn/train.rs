@@ -103,7 +103,7 @@ pub struct TrainOutcome {
     pub training_loss: Vec<f64>,
     /// Validation loss per epoch (after the epoch).
     pub validation_loss: Vec<f64>,
-    /// Samples used for the steps and for the validation.
+    /// Samples the steps were taken on.
     pub n_train: usize,
     /// Samples held out for validation.
     pub n_validation: usize,
