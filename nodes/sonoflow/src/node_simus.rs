@@ -240,3 +240,29 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     kit.finish()?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tukey_window_is_flat_in_the_middle_and_tapers_to_zero() {
+        // r = 1: Hann, 0.5 (1 − cos 2πi/(n−1)); r = 0.5: flat over the middle half.
+        let n = 129;
+        let hann = tukey(n, 1.0);
+        for (i, w) in hann.iter().enumerate() {
+            let exact = 0.5 * (1.0 - (2.0 * std::f64::consts::PI * i as f64 / (n - 1) as f64).cos());
+            assert!((w - exact).abs() < 1e-12, "{i}: {w} vs {exact}");
+        }
+        let t = tukey(n, 0.5);
+        assert_eq!(t[0], 0.0);
+        assert!(t[32..=96].iter().all(|&w| w == 1.0));
+        assert!((t[16] - 0.5).abs() < 1e-12, "{}", t[16]);
+        assert!(t.iter().zip(t.iter().rev()).all(|(a, b)| (a - b).abs() < 1e-12));
+        // Out of range: a clear error naming the field.
+        let bad = serde_json::json!({ "tx_tukey": 1.5 });
+        let e = validate(&bad).unwrap_err();
+        assert!(e.contains("tx_tukey") && e.contains("0 ..= 1"), "{e}");
+        assert!(validate(&serde_json::json!({ "tx_tukey": 0.5 })).is_ok());
+    }
+}
