@@ -24,6 +24,7 @@ pub mod run;
 pub mod stability;
 pub mod tool_beamform;
 pub mod tool_simus;
+pub mod tool_platelet;
 pub mod tool_smoothn;
 pub mod tool_sweep;
 pub mod tools;

@@ -63,6 +63,11 @@ enum Cmd {
     Das(sonoflow::tool_beamform::DasArgs),
     /// Colour Doppler batch tool: (nz, nx, n_frames) packet .npy → velocity, power, variance, flags .npy.
     Doppler(sonoflow::tool_beamform::DopplerArgs),
+    /// Platelet suspension (paper 2): resolved Stokes training data, network training.
+    Platelet {
+        #[command(subcommand)]
+        what: sonoflow::tool_platelet::PlateletCmd,
+    },
     /// Stability matrix: run the stiff and extreme cases of every stage, print case → outcome.
     Stability(sonoflow::stability::StabilityArgs),
     /// Benchmarks (write a Markdown table).
@@ -159,6 +164,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Das(a) => sonoflow::tool_beamform::run_das(&a),
         Cmd::Doppler(a) => sonoflow::tool_beamform::run_doppler(&a),
         Cmd::Stability(a) => sonoflow::stability::run(&a),
+        Cmd::Platelet { what } => sonoflow::tool_platelet::run(&what),
         Cmd::Bench { what } => sonoflow::bench::run(what),
         Cmd::BenchPeer(args) => sonoflow::bench::run_peer(args),
     }
