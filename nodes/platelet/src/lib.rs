@@ -5,6 +5,9 @@
 
 pub mod coefficients;
 pub mod shape;
+pub mod spheroid;
+pub mod stokes;
 
 pub use coefficients::{CoefficientModel, Rotational, Translational};
 pub use shape::{Shape, ShapeError, ShapeSampler};
+pub use stokes::{solve_shape, Outer, ShapeResistance, StokesError, StokesModel, StokesOptions};
