@@ -42,7 +42,7 @@
 //! Stokes flow, so w vanishes on the ball and equals −u∞ on the body. w has a single-layer
 //! representation over both surfaces (the ball's double layer vanishes with w = 0 there, the body's
 //! is a single layer of ∫ f·n-free density for rigid and linear u∞). The ball is meshed as a
-//! second surface (its density is smooth: 10 × 20 panels) and the coupled system is solved. The
+//! second surface (its density is smooth: 12 × 24 panels) and the coupled system is solved. The
 //! force and torque on the body are those of its density σ: u∞'s own stress (2μE for strain, 0 for
 //! uniform flow and rotation) integrates to zero force and torque over a closed surface.
 //! Confinement raises the drag by ≈ 9/4 · a/R (7 % for the mean platelet); it is validated
@@ -99,7 +99,7 @@ pub struct StokesOptions {
     /// Panels along the body's meridian β ∈ [0, π] (even, 4..=64); 2·`n_beta` around it.
     /// Default 16 (512 panels).
     pub n_beta: usize,
-    /// Outer boundary. Default: ball of 50 µm with 10 panels along its meridian.
+    /// Outer boundary. Default: ball of 50 µm with 12 panels along its meridian.
     pub outer: Outer,
     /// Dynamic viscosity \[Pa·s\]. Default 3e-3 (the paper's 3 µg/(µm·s)).
     pub viscosity: f64,
@@ -109,7 +109,7 @@ impl Default for StokesOptions {
     fn default() -> Self {
         StokesOptions {
             n_beta: 16,
-            outer: Outer::Ball { radius: PAPER_BALL_RADIUS, n_beta: 10 },
+            outer: Outer::Ball { radius: PAPER_BALL_RADIUS, n_beta: 12 },
             viscosity: PAPER_VISCOSITY,
         }
     }
@@ -255,7 +255,8 @@ pub fn solve_shape(shape: &Shape, options: &StokesOptions) -> Result<ShapeResist
         alpha_top: shape.alpha_top,
         alpha_bot: shape.alpha_bot,
     };
-    let extent = 0.5 * shape.lx.max(shape.lz).max(2.0 * shape.max_half_thickness(true).max(shape.max_half_thickness(false)));
+    let extent =
+        0.5 * shape.lx.max(shape.lz).max(2.0 * shape.max_half_thickness(true).max(shape.max_half_thickness(false)));
     let mut surfaces = vec![body];
     let mut panels = mesh::mesh(&surfaces, 0, options.n_beta, 2 * options.n_beta);
     let n_body = panels.len();
@@ -284,10 +285,8 @@ pub fn solve_shape(shape: &Shape, options: &StokesOptions) -> Result<ShapeResist
             }
         }
     }
-    let normals: Vec<[f64; 3]> = panels
-        .iter()
-        .map(|p| surfaces[p.surface].normal(0.5 * (p.b0 + p.b1), 0.5 * (p.t0 + p.t1)))
-        .collect();
+    let normals: Vec<[f64; 3]> =
+        panels.iter().map(|p| surfaces[p.surface].normal(0.5 * (p.b0 + p.b1), 0.5 * (p.t0 + p.t1))).collect();
     let length: Vec<f64> = surfaces.iter().map(|s| s.a.max(s.c).max(s.h)).collect();
 
     let dim = 3 * n;
@@ -384,4 +383,3 @@ impl CoefficientModel for StokesModel {
         "stokes"
     }
 }
-

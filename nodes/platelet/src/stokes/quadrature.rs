@@ -171,7 +171,8 @@ fn singular(s: &Surface, rules: &Rules, p: &Panel, acc: &mut Sym) {
     let (db, dt) = ((p.b1 - p.b0) / kb as f64, (p.t1 - p.t0) / kt as f64);
     for i in 0..kb {
         for j in 0..kt {
-            let r = (p.b0 + i as f64 * db, p.b0 + (i + 1) as f64 * db, p.t0 + j as f64 * dt, p.t0 + (j + 1) as f64 * dt);
+            let r =
+                (p.b0 + i as f64 * db, p.b0 + (i + 1) as f64 * db, p.t0 + j as f64 * dt, p.t0 + (j + 1) as f64 * dt);
             if 2 * i + 1 == kb && 2 * j + 1 == kt {
                 continue;
             }
