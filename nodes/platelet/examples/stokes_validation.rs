@@ -37,6 +37,21 @@ fn main() {
     // thin platelet reference: the finest resolution
     let thin = Shape::from_um(3.5, 0.15, 3.5, 0.2, 0.2);
     let thin_ref = solve(&thin, 32, Outer::FreeSpace).0;
+    let o = StokesOptions::default();
+    let t = Instant::now();
+    let reps = 3;
+    for _ in 0..reps {
+        if let Err(e) = solve_shape(&Shape::default(), &o) {
+            eprintln!("solve failed: {e}");
+            std::process::exit(1);
+        }
+    }
+    println!(
+        "default options (n_beta = {}, {} body panels, ball of 50 µm): {:.3} s per shape (mean of {reps}, four right-hand sides)",
+        o.n_beta,
+        2 * o.n_beta * o.n_beta,
+        t.elapsed().as_secs_f64() / reps as f64
+    );
     for &n in &res {
         println!("\n### n_beta = {n} ({} body panels)\n", 2 * n * n);
         println!("| case | quantity | exact | computed | rel. error |");
@@ -60,7 +75,7 @@ fn main() {
             row(name, "rotation (equatorial)", ex.rotation_equatorial, r.rotation_torque);
             row(name, "Jeffery B = c_s/c_r", jeffery_factor(1.5, 0.5 * ly), r.strain_torque / r.rotation_torque);
         }
-        let (r, _) = solve(&Shape::from_um(3.0, 3.0, 3.0, 1.0, 1.0), n, ball(10));
+        let (r, _) = solve(&Shape::from_um(3.0, 3.0, 3.0, 1.0, 1.0), n, ball(12));
         let l: f64 = 1.5 / 50.0;
         let k = (1.0 - l.powi(5)) / (1.0 - 2.25 * l + 2.5 * l.powi(3) - 2.25 * l.powi(5) + l.powi(6));
         row("sphere in 50 µm ball", "drag", 6.0 * PI * MU * a * k, r.force_per_flow[0][0]);
@@ -70,7 +85,7 @@ fn main() {
         row("thin 3.5×0.15, α=0.2 (vs n_beta=32)", "drag y", thin_ref.force_per_flow[1][1], r.force_per_flow[1][1]);
         row("thin 3.5×0.15, α=0.2 (vs n_beta=32)", "rotation", thin_ref.rotation_torque, r.rotation_torque);
         row("thin 3.5×0.15, α=0.2 (vs n_beta=32)", "strain", thin_ref.strain_torque, r.strain_torque);
-        let (r, t) = solve(&Shape::default(), n, ball(10));
+        let (r, t) = solve(&Shape::default(), n, ball(12));
         println!(
             "\nmean platelet in the 50 µm ball: D(0) = {:.2}, D(π/2) = {:.2}, L(π/4) = {:.2}, T_r = {:.1} (paper units); solve {:.3} s per shape",
             r.paper_drag(0.0),

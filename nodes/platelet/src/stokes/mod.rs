@@ -135,7 +135,7 @@ pub enum StokesError {
 impl StokesOptions {
     /// Checks the ranges (the error names the field and the allowed range).
     pub fn validate(&self) -> Result<(), StokesError> {
-        let even = |n: usize, lo: usize, hi: usize| n % 2 == 0 && (lo..=hi).contains(&n);
+        let even = |n: usize, lo: usize, hi: usize| n & 1 == 0 && (lo..=hi).contains(&n);
         if !even(self.n_beta, 4, 64) {
             return Err(StokesError::InvalidOption {
                 field: "n_beta",

@@ -161,10 +161,10 @@ fn singular(s: &Surface, rules: &Rules, p: &Panel, acc: &mut Sym) {
     let (_, _, lb, lt) = geometry(s, (p.b0, p.b1, p.t0, p.t1));
     let odd = |q: f64| -> usize {
         let k = (q.round() as usize).clamp(1, MAX_CELLS);
-        if k % 2 == 0 {
-            k + 1
-        } else {
+        if k & 1 == 1 {
             k
+        } else {
+            k + 1
         }
     };
     let (kb, kt) = if lb >= lt { (odd(lb / lt.max(1e-300)), 1) } else { (1, odd(lt / lb.max(1e-300))) };
