@@ -5,8 +5,12 @@
 //! ([`nn`]).
 
 pub mod coefficients;
+pub mod dataset;
 pub mod nn;
 pub mod shape;
+pub mod spheroid;
+pub mod stokes;
 
 pub use coefficients::{CoefficientModel, Rotational, Translational};
 pub use shape::{Shape, ShapeError, ShapeSampler};
+pub use stokes::{solve_shape, Outer, ShapeResistance, StokesError, StokesModel, StokesOptions};

@@ -75,7 +75,7 @@ impl Default for Shape {
 }
 
 /// Gauss–Legendre nodes and weights on [0, 1].
-fn gauss_legendre_01(n: usize) -> Vec<(f64, f64)> {
+pub(crate) fn gauss_legendre_01(n: usize) -> Vec<(f64, f64)> {
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
         // Newton on P_n from the Chebyshev guess
