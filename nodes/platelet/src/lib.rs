@@ -1,8 +1,9 @@
 //! Platelet suspension of paper 2 (`../shared/papers/fe-nn-platelet-suspensions.txt`): platelets
 //! as point particles with shape, whose drag, lift and torque come from small trained networks.
 //! This crate holds the algorithms without any IPC. So far: the shape model of section 4.1
-//! ([`shape`]), the coefficient interface ([`coefficients`]) and the networks of sections 4.2–4.4
-//! ([`nn`]).
+//! ([`shape`]), the coefficient interface of eq 6 ([`coefficients`]), closed forms of spheroids
+//! ([`spheroid`]), a boundary-element Stokes solver for the resolved runs of section 4.3
+//! ([`stokes`]), the training data ([`dataset`]) and the networks of sections 4.2–4.4 ([`nn`]).
 
 pub mod coefficients;
 pub mod dataset;
