@@ -27,16 +27,22 @@ pub struct CellGrid {
     cell_of: Vec<u32>,
     start: Vec<u32>,
     sorted: Vec<u32>,
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    rs: Vec<f64>,
     /// Overlapping pairs (i < j) found by the last [`CellGrid::find_pairs`].
     pub pairs: Vec<(u32, u32)>,
     /// Cell size of the last search \[m\].
     pub cell_size: f64,
     /// Cells of the last search (nx, ny).
     pub dims: (usize, usize),
+    /// Target mean particles per cell when the interaction distance allows larger cells
+    /// (default 0: the smallest admissible cells).
+    pub occupancy: f64,
 }
 
 impl CellGrid {
-    /// All pairs i < j with |X_i − X_j| < r_i + r_j, into `self.pairs` (sorted by i, then by cell).
+    /// All pairs i < j with |X_i − X_j| < r_i + r_j, into `self.pairs` (in cell order).
     /// `min_cell` is a lower bound of the cell size \[m\] (e.g. the largest displacement per step).
     pub fn find_pairs(&mut self, x: &[f64], y: &[f64], r: &[f64], min_cell: f64) -> &[(u32, u32)] {
         self.pairs.clear();
@@ -52,7 +58,11 @@ impl CellGrid {
             y1 = y1.max(y[i]);
             rmax = rmax.max(r[i]);
         }
-        let mut cs = (2.0 * rmax).max(min_cell).max(1e-300);
+        // at least the interaction distance and the displacement; for sparse sets about one
+        // particle per cell (`occupancy`), where the per-cell overhead and the candidate tests
+        // balance
+        let fill = ((x1 - x0) * (y1 - y0) * self.occupancy.max(0.0) / n as f64).sqrt();
+        let mut cs = (2.0 * rmax).max(min_cell).max(fill).max(1e-300);
         let max_cells = 4 * n + 64;
         let dims = |cs: f64| (((x1 - x0) / cs) as usize + 1, ((y1 - y0) / cs) as usize + 1);
         let (mut nx, mut ny) = dims(cs);
@@ -90,24 +100,34 @@ impl CellGrid {
             self.start[c] = self.start[c - 1];
         }
         self.start[0] = 0;
-        for i in 0..n {
+        // gather the positions in cell order: the neighbour loops then read contiguous memory
+        self.xs.clear();
+        self.ys.clear();
+        self.rs.clear();
+        for &i in &self.sorted {
+            let i = i as usize;
+            self.xs.push(x[i]);
+            self.ys.push(y[i]);
+            self.rs.push(r[i]);
+        }
+        for a in 0..n {
+            let i = self.sorted[a] as usize;
             let c = self.cell_of[i] as usize;
+            let (xi, yi, ri) = (self.xs[a], self.ys[a], self.rs[a]);
             let (cx, cy) = ((c % nx) as isize, (c / nx) as isize);
-            // own cell (j > i) and the forward half of the neighbours: each pair exactly once
+            // own cell (later in the cell) and the forward half of the neighbours: each pair once
             for (k, (dx, dy)) in [(0isize, 0isize), (1, 0), (-1, 1), (0, 1), (1, 1)].into_iter().enumerate() {
                 let (qx, qy) = (cx + dx, cy + dy);
                 if qx < 0 || qy < 0 || qx >= nx as isize || qy >= ny as isize {
                     continue;
                 }
                 let q = qy as usize * nx + qx as usize;
-                for s in self.start[q]..self.start[q + 1] {
-                    let j = self.sorted[s as usize] as usize;
-                    if k == 0 && j <= i {
-                        continue;
-                    }
-                    let (ddx, ddy) = (x[j] - x[i], y[j] - y[i]);
-                    let rr = r[i] + r[j];
+                let from = if k == 0 { a + 1 } else { self.start[q] as usize };
+                for b in from..self.start[q + 1] as usize {
+                    let (ddx, ddy) = (self.xs[b] - xi, self.ys[b] - yi);
+                    let rr = ri + self.rs[b];
                     if ddx * ddx + ddy * ddy < rr * rr {
+                        let j = self.sorted[b] as usize;
                         self.pairs.push(if i < j { (i as u32, j as u32) } else { (j as u32, i as u32) });
                     }
                 }

@@ -28,6 +28,12 @@ pub struct FlowSample {
 }
 
 impl FlowSample {
+    /// E'_xy from sin 2φ and cos 2φ.
+    #[inline]
+    pub fn body_strain_xy_sc(&self, s2: f64, c2: f64) -> f64 {
+        0.5 * (self.strain[2] - self.strain[0]) * s2 + self.strain[1] * c2
+    }
+
     /// The off-diagonal strain rate in the frame of a body rotated by φ from the lab x axis:
     /// E' = Rᵀ E R, E'_xy = ½ (E_yy − E_xx) sin 2φ + E_xy cos 2φ.
     pub fn body_strain_xy(&self, phi: f64) -> f64 {
