@@ -60,8 +60,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut d = Dynamics::new(params)?;
     let macro_k = params.sub_step * params.sub_steps as f64;
     let mut total = Timings::default();
-    println!("{n} particles, collision radius {factor} Lx, flow: {}", if use_lattice { "lattice 10 µm (eq 12)" } else { "analytic channel" });
-    println!("{:>5} {:>10} {:>10} {:>12} {:>8} {:>9}", "step", "advect s", "collide s", "coeffs s", "pairs", "impulses");
+    println!(
+        "{n} particles, collision radius {factor} Lx, flow: {}",
+        if use_lattice { "lattice 10 µm (eq 12)" } else { "analytic channel" }
+    );
+    println!(
+        "{:>5} {:>10} {:>10} {:>12} {:>8} {:>9}",
+        "step", "advect s", "collide s", "coeffs s", "pairs", "impulses"
+    );
     let t_run = Instant::now();
     for step in 0..10 {
         let tm = d.macro_step(&mut p, flow, &model, step as f64 * macro_k)?;
@@ -88,6 +94,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     ] {
         println!("{name:<28} {s:>9.3} {:>18.1}", per(s));
     }
-    println!("(seeding {seed_s:.3} s; overlapping pairs over the run {}, impulses {}, wall hits {})", total.pairs, total.impulses, total.wall_hits);
+    println!(
+        "(seeding {seed_s:.3} s; overlapping pairs over the run {}, impulses {}, wall hits {})",
+        total.pairs, total.impulses, total.wall_hits
+    );
     Ok(())
 }

@@ -1,4 +1,4 @@
-#![allow(clippy::unwrap_used)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 //! The 2-D platelet dynamics against analytic results: Jeffery's orbit, exponential relaxation of
 //! a sphere, the stiff explicit/exponential comparison, advection along the channel streamlines,
 //! eq 12 on linear fields, collisions (momentum, lattice = all pairs), walls and bad inputs.
@@ -91,7 +91,13 @@ fn one(shape: Shape, s: ParticleState) -> Particles {
 }
 
 /// Runs `n` sub-steps from t = 0; returns the state after each.
-fn run(d: &mut Dynamics, p: &mut Particles, flow: &dyn CarrierFlow, m: &dyn CoefficientModel, n: usize) -> Vec<ParticleState> {
+fn run(
+    d: &mut Dynamics,
+    p: &mut Particles,
+    flow: &dyn CarrierFlow,
+    m: &dyn CoefficientModel,
+    n: usize,
+) -> Vec<ParticleState> {
     let h = d.params().sub_step;
     (0..n)
         .map(|k| {
@@ -326,12 +332,17 @@ fn eq12_is_exact_for_rigid_rotation_shear_and_linear_fields() {
     for case in 0..3 {
         // v = v0 + G (x − c)
         let g: [[f64; 2]; 2] = match case {
-            0 => [[0.0, -3.0], [3.0, 0.0]],    // rigid rotation ω = 3
-            1 => [[0.0, 40.0], [0.0, 0.0]],    // shear: ω = −20, E_xy = 20
-            _ => [[rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0)], [rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0)]],
+            0 => [[0.0, -3.0], [3.0, 0.0]], // rigid rotation ω = 3
+            1 => [[0.0, 40.0], [0.0, 0.0]], // shear: ω = −20, E_xy = 20
+            _ => [
+                [rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0)],
+                [rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0)],
+            ],
         };
         let (v0, c) = ([1e-3, -2e-3], [3e-4, 1e-5]);
-        let field = |x: f64, y: f64| [v0[0] + g[0][0] * (x - c[0]) + g[0][1] * (y - c[1]), v0[1] + g[1][0] * (x - c[0]) + g[1][1] * (y - c[1])];
+        let field = |x: f64, y: f64| {
+            [v0[0] + g[0][0] * (x - c[0]) + g[0][1] * (y - c[1]), v0[1] + g[1][0] * (x - c[0]) + g[1][1] * (y - c[1])]
+        };
         let mut v = Vec::new();
         for j in 0..ny {
             for i in 0..nx {
@@ -350,7 +361,10 @@ fn eq12_is_exact_for_rigid_rotation_shear_and_linear_fields() {
             }
         }
         for _ in 0..50 {
-            let x = [origin[0] + rng.gen_range(0.0..(nx - 1) as f64 * h), origin[1] + rng.gen_range(0.0..(ny - 1) as f64 * h)];
+            let x = [
+                origin[0] + rng.gen_range(0.0..(nx - 1) as f64 * h),
+                origin[1] + rng.gen_range(0.0..(ny - 1) as f64 * h),
+            ];
             let s = lat.sample(x, 0.0);
             let want = field(x[0], x[1]);
             assert!((s.v[0] - want[0]).abs() < 1e-15 && (s.v[1] - want[1]).abs() < 1e-15, "bilinear");
@@ -507,9 +521,21 @@ fn bad_inputs_give_clear_errors() {
 
     // flows
     assert!(matches!(SimpleShear::new(f64::NAN), Err(FlowError::Invalid { field: "shear_rate", .. })));
-    assert!(matches!(Channel { height: -1.0, ..Default::default() }.validate(), Err(FlowError::Invalid { field: "height", .. })));
-    assert!(matches!(Channel { ramp: Some(0.0), ..Default::default() }.validate(), Err(FlowError::Invalid { field: "ramp", .. })));
+    assert!(matches!(
+        Channel { height: -1.0, ..Default::default() }.validate(),
+        Err(FlowError::Invalid { field: "height", .. })
+    ));
+    assert!(matches!(
+        Channel { ramp: Some(0.0), ..Default::default() }.validate(),
+        Err(FlowError::Invalid { field: "ramp", .. })
+    ));
     assert!(matches!(LatticeField::new([0.0; 2], 1e-5, 2, 2, vec![[0.0; 2]; 3]), Err(FlowError::Size { .. })));
-    assert!(matches!(LatticeField::new([0.0; 2], 1e-5, 2, 2, vec![[0.0, f64::NAN]; 4]), Err(FlowError::NonFinite { node: 0, .. })));
-    assert!(matches!(LatticeField::new([0.0; 2], -1.0, 2, 2, vec![[0.0; 2]; 4]), Err(FlowError::Invalid { field: "h", .. })));
+    assert!(matches!(
+        LatticeField::new([0.0; 2], 1e-5, 2, 2, vec![[0.0, f64::NAN]; 4]),
+        Err(FlowError::NonFinite { node: 0, .. })
+    ));
+    assert!(matches!(
+        LatticeField::new([0.0; 2], -1.0, 2, 2, vec![[0.0; 2]; 4]),
+        Err(FlowError::Invalid { field: "h", .. })
+    ));
 }

@@ -254,7 +254,8 @@ impl LatticeField {
         let h = self.h;
         let d_t = std::f64::consts::SQRT_2 * h;
         // nodes counter-clockwise from the lower left, offsets from the cell centre (units of h/2)
-        const CORNERS: [(usize, usize, f64, f64); 4] = [(0, 0, -1.0, -1.0), (1, 0, 1.0, -1.0), (1, 1, 1.0, 1.0), (0, 1, -1.0, 1.0)];
+        const CORNERS: [(usize, usize, f64, f64); 4] =
+            [(0, 0, -1.0, -1.0), (1, 0, 1.0, -1.0), (1, 1, 1.0, 1.0), (0, 1, -1.0, 1.0)];
         for j in 0..ny - 1 {
             for i in 0..nx - 1 {
                 let mut circ = 0.0;
@@ -266,8 +267,12 @@ impl LatticeField {
                 }
                 let c = j * (nx - 1) + i;
                 self.cell_omega[c] = circ / (2.0 * d_t);
-                let [v00, v10, v01, v11] =
-                    [self.v[j * nx + i], self.v[j * nx + i + 1], self.v[(j + 1) * nx + i], self.v[(j + 1) * nx + i + 1]];
+                let [v00, v10, v01, v11] = [
+                    self.v[j * nx + i],
+                    self.v[j * nx + i + 1],
+                    self.v[(j + 1) * nx + i],
+                    self.v[(j + 1) * nx + i + 1],
+                ];
                 let dx = |k: usize| (v10[k] + v11[k] - v00[k] - v01[k]) / (2.0 * h);
                 let dy = |k: usize| (v01[k] + v11[k] - v00[k] - v10[k]) / (2.0 * h);
                 self.cell_strain[c] = [dx(0), 0.5 * (dy(0) + dx(1)), dy(1)];
@@ -290,10 +295,10 @@ impl CarrierFlow for LatticeField {
         let j = (fy as usize).min(self.ny - 2);
         let (sx, sy) = (fx - i as f64, fy - j as f64);
         let nx = self.nx;
-        let (v00, v10, v01, v11) = (self.v[j * nx + i], self.v[j * nx + i + 1], self.v[(j + 1) * nx + i], self.v[(j + 1) * nx + i + 1]);
-        let bil = |k: usize| {
-            (1.0 - sy) * ((1.0 - sx) * v00[k] + sx * v10[k]) + sy * ((1.0 - sx) * v01[k] + sx * v11[k])
-        };
+        let (v00, v10, v01, v11) =
+            (self.v[j * nx + i], self.v[j * nx + i + 1], self.v[(j + 1) * nx + i], self.v[(j + 1) * nx + i + 1]);
+        let bil =
+            |k: usize| (1.0 - sy) * ((1.0 - sx) * v00[k] + sx * v10[k]) + sy * ((1.0 - sx) * v01[k] + sx * v11[k]);
         let c = j * (nx - 1) + i;
         FlowSample { v: [bil(0), bil(1)], omega: self.cell_omega[c], strain: self.cell_strain[c] }
     }

@@ -97,7 +97,14 @@ impl Propagator {
         } else {
             tau * tau * (phi1(xa) - phi1(xb)) / (xa - xb)
         };
-        Propagator { e: [er * c, er * s], p: [tau * pr, tau * pi], eb: (-b * tau).exp(), qb: tau * phi1(-b * tau), g, gg }
+        Propagator {
+            e: [er * c, er * s],
+            p: [tau * pr, tau * pi],
+            eb: (-b * tau).exp(),
+            qb: tau * phi1(-b * tau),
+            g,
+            gg,
+        }
     }
 }
 

@@ -286,7 +286,10 @@ impl Dynamics {
             return Err(DynamicsError::Invalid { field: "t", value: t, allowed: "finite" });
         }
         let t0 = Instant::now();
-        if self.sub_step_count % self.params.coeff_every as u64 == 0 || p.n_trans < p.len() || p.n_rot < p.len() {
+        if self.sub_step_count.is_multiple_of(self.params.coeff_every as u64)
+            || p.n_trans < p.len()
+            || p.n_rot < p.len()
+        {
             self.refresh_coefficients(p, flow, model, t)?;
         }
         let t1 = Instant::now();

@@ -67,7 +67,11 @@ impl Particles {
     /// (radius = factor × Lx) in (0, 10].
     pub fn new(density: f64, radius_factor: f64) -> Result<Self, DynamicsError> {
         if !(density.is_finite() && density > 0.0 && density <= 1e5) {
-            return Err(DynamicsError::Invalid { field: "density", value: density, allowed: "0 < density <= 1e5 kg/m^3" });
+            return Err(DynamicsError::Invalid {
+                field: "density",
+                value: density,
+                allowed: "0 < density <= 1e5 kg/m^3",
+            });
         }
         if !(radius_factor.is_finite() && radius_factor > 0.0 && radius_factor <= 10.0) {
             return Err(DynamicsError::Invalid {
