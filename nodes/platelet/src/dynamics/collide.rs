@@ -2,9 +2,9 @@
 //!
 //! **Reading of Remark 1.** "We treat particles as spheres with radius L_x": taken literally, the
 //! collision sphere of a particle has radius f · Lx with f = 1 by default
-//! ([`super::DynamicsParams::radius_factor`]; Lx is the full in-plane axis, so f = 1/2 would be the
+//! (`radius_factor` of [`super::Particles::new`]; Lx is the full in-plane axis, so f = 1/2 would be the
 //! sphere circumscribing the body's in-plane section). Spheres are centred at the centre of mass.
-//! The model of the paper's reference [21] is not given; this module uses:
+//! The model of the paper's reference \[21\] is not given; this module uses:
 //!
 //! - **Detection** on a regular lattice of square cells (section 5.2.1): a particle is only tested
 //!   against particles of its own and of the adjacent cells. The cell size is at least the
@@ -110,29 +110,55 @@ impl CellGrid {
             self.ys.push(y[i]);
             self.rs.push(r[i]);
         }
-        for a in 0..n {
-            let i = self.sorted[a] as usize;
-            let c = self.cell_of[i] as usize;
-            let (xi, yi, ri) = (self.xs[a], self.ys[a], self.rs[a]);
-            let (cx, cy) = ((c % nx) as isize, (c / nx) as isize);
-            // own cell (later in the cell) and the forward half of the neighbours: each pair once
-            for (k, (dx, dy)) in [(0isize, 0isize), (1, 0), (-1, 1), (0, 1), (1, 1)].into_iter().enumerate() {
-                let (qx, qy) = (cx + dx, cy + dy);
-                if qx < 0 || qy < 0 || qx >= nx as isize || qy >= ny as isize {
-                    continue;
+        // locals: the inner loop must not reload the buffers through `self` after each push
+        let mut pairs = std::mem::take(&mut self.pairs);
+        let (xs, ys, rs, start, sorted) = (&self.xs[..], &self.ys[..], &self.rs[..], &self.start[..], &self.sorted[..]);
+        let mut a = 0;
+        for cy in 0..ny {
+            for cx in 0..nx {
+                let c = cy * nx + cx;
+                let end = start[c + 1] as usize;
+                // forward half of the neighbours: each pair once
+                let right = cx + 1 < nx;
+                let up = cy + 1 < ny;
+                let mut nb = [(0usize, 0usize); 4];
+                let mut m = 0;
+                if right {
+                    nb[m] = (start[c + 1] as usize, start[c + 2] as usize);
+                    m += 1;
                 }
-                let q = qy as usize * nx + qx as usize;
-                let from = if k == 0 { a + 1 } else { self.start[q] as usize };
-                for b in from..self.start[q + 1] as usize {
-                    let (ddx, ddy) = (self.xs[b] - xi, self.ys[b] - yi);
-                    let rr = ri + self.rs[b];
-                    if ddx * ddx + ddy * ddy < rr * rr {
-                        let j = self.sorted[b] as usize;
-                        self.pairs.push(if i < j { (i as u32, j as u32) } else { (j as u32, i as u32) });
+                if up {
+                    let u = c + nx;
+                    let lo = if cx > 0 { u - 1 } else { u };
+                    let hi = if right { u + 1 } else { u };
+                    // cells u − 1, u, u + 1 of the row above are contiguous in cell order
+                    nb[m] = (start[lo] as usize, start[hi + 1] as usize);
+                    m += 1;
+                }
+                while a < end {
+                    let (xi, yi, ri) = (xs[a], ys[a], rs[a]);
+                    let i = sorted[a];
+                    let test = |b: usize, pairs: &mut Vec<(u32, u32)>| {
+                        let (ddx, ddy) = (xs[b] - xi, ys[b] - yi);
+                        let rr = ri + rs[b];
+                        if ddx * ddx + ddy * ddy < rr * rr {
+                            let j = sorted[b];
+                            pairs.push(if i < j { (i, j) } else { (j, i) });
+                        }
+                    };
+                    for b in a + 1..end {
+                        test(b, &mut pairs);
                     }
+                    for &(lo, hi) in &nb[..m] {
+                        for b in lo..hi {
+                            test(b, &mut pairs);
+                        }
+                    }
+                    a += 1;
                 }
             }
         }
+        self.pairs = pairs;
         &self.pairs
     }
 }
