@@ -92,6 +92,9 @@ pub struct DynamicsParams {
     pub collisions: bool,
     /// Coefficient of restitution e ∈ [0, 1]. Default 1 (elastic).
     pub restitution: f64,
+    /// Worker threads for the advection (collisions and coefficient calls stay serial). 1
+    /// (default) runs serially; results are identical bit for bit for any count.
+    pub threads: usize,
     /// Below this |δv| \[m/s\] ψ is kept from the last refresh. Default 1e-12 (the rounding of a
     /// relaxed V is ~1e-19 m/s at 5 mm/s).
     pub psi_min_speed: f64,
@@ -107,6 +110,7 @@ impl Default for DynamicsParams {
             coupling: false,
             collisions: true,
             restitution: 1.0,
+            threads: 1,
             psi_min_speed: 1e-12,
         }
     }
@@ -124,6 +128,9 @@ impl DynamicsParams {
         }
         if self.coeff_every == 0 {
             return inv("coeff_every", 0.0, "coeff_every >= 1");
+        }
+        if self.threads == 0 || self.threads > 1024 {
+            return inv("threads", self.threads as f64, "1 <= threads <= 1024");
         }
         if !(0.0..=1.0).contains(&self.restitution) {
             return inv("restitution", self.restitution, "0 <= restitution <= 1");
@@ -172,6 +179,8 @@ pub struct Dynamics {
     half: Vec<Propagator>,
     full: Vec<Propagator>,
     grid: CellGrid,
+    /// Worker pool for the advection when `threads > 1`.
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
 }
 
 /// Mean particles per collision cell the lattice aims at (module `collide`).
@@ -183,7 +192,19 @@ impl Dynamics {
         params.validate()?;
         let mut grid = CellGrid::default();
         grid.occupancy = CELL_OCCUPANCY;
-        Ok(Dynamics { params, sub_step_count: 0, half: Vec::new(), full: Vec::new(), grid })
+        let pool = if params.threads > 1 {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(params.threads).build().map_err(|_| {
+                DynamicsError::Invalid {
+                    field: "threads",
+                    value: params.threads as f64,
+                    allowed: "a thread count the system can start",
+                }
+            })?;
+            Some(std::sync::Arc::new(pool))
+        } else {
+            None
+        };
+        Ok(Dynamics { params, sub_step_count: 0, half: Vec::new(), full: Vec::new(), grid, pool })
     }
 
     /// The parameters.
@@ -334,66 +355,131 @@ impl Dynamics {
         Ok(tm)
     }
 
-    /// Integrates all particles over one sub-step; returns the largest speed.
+    /// Integrates all particles over one sub-step; returns the largest speed (× √2).
     fn advect(&mut self, p: &mut Particles, flow: &dyn CarrierFlow, t: f64) -> Result<f64, DynamicsError> {
-        let tau = self.params.sub_step;
-        let coupled = self.params.coupling;
-        let mut vmax = 0.0f64;
-        let mut ok = true;
-        for i in 0..p.len() {
-            let k = Kin { x: [p.x[i], p.y[i]], phi: p.phi[i], v: [p.vx[i], p.vy[i]], omega: p.omega[i] };
-            let b = Body { m: p.mass[i], i: p.inertia[i], tr: p.trans[i], rot: p.rot[i], psi: p.psi[i] };
-            let f1 = flow.sample(k.x, t);
-            let (s1, c1) = (2.0 * k.phi).sin_cos();
-            let e1 = f1.body_strain_xy_sc(s1, c1);
-            let new = match self.params.integrator {
-                Integrator::ExplicitEuler => integrate::euler(&k, &b, tau, &f1, e1, coupled),
-                Integrator::Exponential if !coupled => {
-                    let mid = integrate::relax_decoupled(&k, &b, &self.half[i], 0.5 * tau, &f1, e1);
-                    let f2 = flow.sample(mid.x, t + 0.5 * tau);
-                    let (s2, c2) = sin_cos_near(2.0 * k.phi, s1, c1, 2.0 * (mid.phi - k.phi));
-                    let e2 = f2.body_strain_xy_sc(s2, c2);
-                    integrate::relax_decoupled(&k, &b, &self.full[i], tau, &f2, e2)
+        let ro = ReadOnly {
+            mass: &p.mass,
+            inertia: &p.inertia,
+            trans: &p.trans,
+            rot: &p.rot,
+            psi: &p.psi,
+            half: &self.half,
+            full: &self.full,
+        };
+        let params = &self.params;
+        let (vmax, ok) = match &self.pool {
+            None => advect_chunk(
+                params,
+                flow,
+                t,
+                0,
+                &ro,
+                [&mut p.x, &mut p.y, &mut p.phi, &mut p.vx, &mut p.vy, &mut p.omega],
+            )?,
+            Some(pool) => {
+                use rayon::prelude::*;
+                let n = p.x.len();
+                let cs = n.div_ceil(4 * pool.current_num_threads()).max(256);
+                let results: Vec<Result<(f64, bool), DynamicsError>> = pool.install(|| {
+                    p.x.par_chunks_mut(cs)
+                        .zip(p.y.par_chunks_mut(cs))
+                        .zip(p.phi.par_chunks_mut(cs))
+                        .zip(p.vx.par_chunks_mut(cs))
+                        .zip(p.vy.par_chunks_mut(cs))
+                        .zip(p.omega.par_chunks_mut(cs))
+                        .enumerate()
+                        .map(|(k, (((((x, y), phi), vx), vy), om))| {
+                            advect_chunk(params, flow, t, k * cs, &ro, [x, y, phi, vx, vy, om])
+                        })
+                        .collect()
+                });
+                let mut acc = (0.0f64, true);
+                for r in results {
+                    let (v, ok) = r?;
+                    acc = (acc.0.max(v), acc.1 & ok);
                 }
-                Integrator::Exponential => {
-                    let mid = integrate::relax_coupled(&k, &b, 0.5 * tau, &f1, e1, k.phi);
-                    let mid = mid.ok_or(DynamicsError::Coefficient {
-                        model: "coupled resistance".into(),
-                        index: i,
-                        field: "c_p",
-                        value: b.tr.c_p,
-                        allowed: "a nonsingular resistance matrix",
-                    })?;
-                    let f2 = flow.sample(mid.x, t + 0.5 * tau);
-                    let e2 = f2.body_strain_xy(mid.phi);
-                    integrate::relax_coupled(&k, &b, tau, &f2, e2, mid.phi).ok_or(DynamicsError::Coefficient {
-                        model: "coupled resistance".into(),
-                        index: i,
-                        field: "c_p",
-                        value: b.tr.c_p,
-                        allowed: "a nonsingular resistance matrix",
-                    })?
-                }
-            };
-            ok &= new.x[0].is_finite()
-                & new.x[1].is_finite()
-                & new.phi.is_finite()
-                & new.v[0].is_finite()
-                & new.v[1].is_finite()
-                & new.omega.is_finite();
-            vmax = vmax.max(new.v[0].abs().max(new.v[1].abs()));
-            p.x[i] = new.x[0];
-            p.y[i] = new.x[1];
-            p.phi[i] = new.phi;
-            p.vx[i] = new.v[0];
-            p.vy[i] = new.v[1];
-            p.omega[i] = new.omega;
-        }
+                acc
+            }
+        };
         if !ok {
             p.check_finite()?;
         }
         Ok(vmax * std::f64::consts::SQRT_2)
     }
+}
+
+/// The arrays advection reads.
+struct ReadOnly<'a> {
+    mass: &'a [f64],
+    inertia: &'a [f64],
+    trans: &'a [crate::coefficients::Translational],
+    rot: &'a [crate::coefficients::Rotational],
+    psi: &'a [f64],
+    half: &'a [Propagator],
+    full: &'a [Propagator],
+}
+
+/// Advects particles `off..off + len` (the mutable slices: x, y, φ, V_x, V_y, Ω); returns the
+/// largest velocity component and whether everything stayed finite. The serial and the parallel
+/// runs call this same kernel per particle: same bits for any thread count.
+fn advect_chunk(
+    params: &DynamicsParams,
+    flow: &dyn CarrierFlow,
+    t: f64,
+    off: usize,
+    ro: &ReadOnly<'_>,
+    rw: [&mut [f64]; 6],
+) -> Result<(f64, bool), DynamicsError> {
+    let tau = params.sub_step;
+    let coupled = params.coupling;
+    let [xs, ys, phis, vxs, vys, oms] = rw;
+    let mut vmax = 0.0f64;
+    let mut ok = true;
+    for l in 0..xs.len() {
+        let i = off + l;
+        let k = Kin { x: [xs[l], ys[l]], phi: phis[l], v: [vxs[l], vys[l]], omega: oms[l] };
+        let b = Body { m: ro.mass[i], i: ro.inertia[i], tr: ro.trans[i], rot: ro.rot[i], psi: ro.psi[i] };
+        let f1 = flow.sample(k.x, t);
+        let (s1, c1) = (2.0 * k.phi).sin_cos();
+        let e1 = f1.body_strain_xy_sc(s1, c1);
+        let new = match params.integrator {
+            Integrator::ExplicitEuler => integrate::euler(&k, &b, tau, &f1, e1, coupled),
+            Integrator::Exponential if !coupled => {
+                let mid = integrate::relax_decoupled(&k, &b, &ro.half[i], 0.5 * tau, &f1, e1);
+                let f2 = flow.sample(mid.x, t + 0.5 * tau);
+                let (s2, c2) = sin_cos_near(2.0 * k.phi, s1, c1, 2.0 * (mid.phi - k.phi));
+                let e2 = f2.body_strain_xy_sc(s2, c2);
+                integrate::relax_decoupled(&k, &b, &ro.full[i], tau, &f2, e2)
+            }
+            Integrator::Exponential => {
+                let singular = || DynamicsError::Coefficient {
+                    model: "coupled resistance".into(),
+                    index: i,
+                    field: "c_p",
+                    value: b.tr.c_p,
+                    allowed: "a nonsingular resistance matrix",
+                };
+                let mid = integrate::relax_coupled(&k, &b, 0.5 * tau, &f1, e1, k.phi).ok_or_else(singular)?;
+                let f2 = flow.sample(mid.x, t + 0.5 * tau);
+                let e2 = f2.body_strain_xy(mid.phi);
+                integrate::relax_coupled(&k, &b, tau, &f2, e2, mid.phi).ok_or_else(singular)?
+            }
+        };
+        ok &= new.x[0].is_finite()
+            & new.x[1].is_finite()
+            & new.phi.is_finite()
+            & new.v[0].is_finite()
+            & new.v[1].is_finite()
+            & new.omega.is_finite();
+        vmax = vmax.max(new.v[0].abs().max(new.v[1].abs()));
+        xs[l] = new.x[0];
+        ys[l] = new.x[1];
+        phis[l] = new.phi;
+        vxs[l] = new.v[0];
+        vys[l] = new.v[1];
+        oms[l] = new.omega;
+    }
+    Ok((vmax, ok))
 }
 
 /// sin and cos of a + d from those of a, with a short series for small d (error below 2e-16
