@@ -5,7 +5,7 @@
 //! `CoefficientModel`). Prints the time split into advection, collisions and coefficient
 //! evaluation. Serial by default (the advection runs on `threads` workers if given).
 //!
-//! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads]]]]`
+//! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads [coupled]]]]]`
 //! (N particles, default 165000; collision radius = factor × Lx, default 1 as Remark 1 reads;
 //! `lattice` samples the channel onto a 10 µm lattice and uses eq 12 as Algorithm 2 step 2 does).
 
@@ -24,6 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let factor: f64 = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(1.0);
     let use_lattice = args.get(3).is_some_and(|s| s == "lattice");
     let threads: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(1);
+    let coupling = args.get(5).is_some_and(|s| s == "coupled");
     let (length, height) = (12e-3, 2e-3);
     let channel = Channel::default();
     channel.validate()?;
@@ -58,7 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed_s = t_seed.elapsed().as_secs_f64();
 
     // 20 sub-steps of 0.25 ms, coefficients every 10th
-    let params = DynamicsParams { threads, ..Default::default() };
+    let params = DynamicsParams { threads, coupling, ..Default::default() };
     let mut d = Dynamics::new(params)?;
     let macro_k = params.sub_step * params.sub_steps as f64;
     let mut total = Timings::default();

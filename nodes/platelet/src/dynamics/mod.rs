@@ -44,7 +44,7 @@ pub use standin::DiscStandIn;
 
 use crate::coefficients::CoefficientModel;
 use crate::shape::ShapeError;
-use integrate::{Body, Kin, Propagator};
+use integrate::{Body, CoupledPropagator, Kin, Propagator};
 use std::time::{Duration, Instant};
 
 /// Errors of the dynamics.
@@ -178,6 +178,9 @@ pub struct Dynamics {
     /// Propagators for τ/2 and τ, per particle.
     half: Vec<Propagator>,
     full: Vec<Propagator>,
+    /// Coupled propagators for τ/2 and τ, per particle (only with the coupling on).
+    coupled_half: Vec<CoupledPropagator>,
+    coupled_full: Vec<CoupledPropagator>,
     grid: CellGrid,
     /// Worker pool for the advection when `threads > 1`.
     pool: Option<std::sync::Arc<rayon::ThreadPool>>,
@@ -204,7 +207,16 @@ impl Dynamics {
         } else {
             None
         };
-        Ok(Dynamics { params, sub_step_count: 0, half: Vec::new(), full: Vec::new(), grid, pool })
+        Ok(Dynamics {
+            params,
+            sub_step_count: 0,
+            half: Vec::new(),
+            full: Vec::new(),
+            coupled_half: Vec::new(),
+            coupled_full: Vec::new(),
+            grid,
+            pool,
+        })
     }
 
     /// The parameters.
@@ -291,6 +303,16 @@ impl Dynamics {
             self.half[i] = Propagator::new(a, l, b, 0.5 * tau);
             self.full[i] = Propagator::new(a, l, b, tau);
         }
+        if self.params.coupling {
+            self.coupled_half.resize(n, CoupledPropagator::default());
+            self.coupled_full.resize(n, CoupledPropagator::default());
+            for i in 0..n {
+                let body = Body { m: p.mass[i], i: p.inertia[i], tr: p.trans[i], rot: p.rot[i], psi: p.psi[i] };
+                let singular = || model_err(i, "c_p", p.trans[i].c_p, "a nonsingular coupled resistance matrix");
+                self.coupled_half[i] = CoupledPropagator::new(&body, 0.5 * tau).ok_or_else(singular)?;
+                self.coupled_full[i] = CoupledPropagator::new(&body, tau).ok_or_else(singular)?;
+            }
+        }
         Ok(())
     }
 
@@ -365,6 +387,8 @@ impl Dynamics {
             psi: &p.psi,
             half: &self.half,
             full: &self.full,
+            coupled_half: &self.coupled_half,
+            coupled_full: &self.coupled_full,
         };
         let params = &self.params;
         let (vmax, ok) = match &self.pool {
@@ -417,6 +441,8 @@ struct ReadOnly<'a> {
     psi: &'a [f64],
     half: &'a [Propagator],
     full: &'a [Propagator],
+    coupled_half: &'a [CoupledPropagator],
+    coupled_full: &'a [CoupledPropagator],
 }
 
 /// Advects particles `off..off + len` (the mutable slices: x, y, φ, V_x, V_y, Ω); returns the
@@ -430,6 +456,7 @@ fn advect_chunk(
     ro: &ReadOnly<'_>,
     rw: [&mut [f64]; 6],
 ) -> Result<(f64, bool), DynamicsError> {
+    // (a Result for kernels that can fail; none does at present)
     let tau = params.sub_step;
     let coupled = params.coupling;
     let [xs, ys, phis, vxs, vys, oms] = rw;
@@ -452,17 +479,11 @@ fn advect_chunk(
                 integrate::relax_decoupled(&k, &b, &ro.full[i], tau, &f2, e2)
             }
             Integrator::Exponential => {
-                let singular = || DynamicsError::Coefficient {
-                    model: "coupled resistance".into(),
-                    index: i,
-                    field: "c_p",
-                    value: b.tr.c_p,
-                    allowed: "a nonsingular resistance matrix",
-                };
-                let mid = integrate::relax_coupled(&k, &b, 0.5 * tau, &f1, e1, k.phi).ok_or_else(singular)?;
+                let mid = integrate::relax_coupled_cached(&k, &b, &ro.coupled_half[i], 0.5 * tau, &f1, e1, k.phi);
                 let f2 = flow.sample(mid.x, t + 0.5 * tau);
-                let e2 = f2.body_strain_xy(mid.phi);
-                integrate::relax_coupled(&k, &b, tau, &f2, e2, mid.phi).ok_or_else(singular)?
+                let (s2, c2) = sin_cos_near(2.0 * k.phi, s1, c1, 2.0 * (mid.phi - k.phi));
+                let e2 = f2.body_strain_xy_sc(s2, c2);
+                integrate::relax_coupled_cached(&k, &b, &ro.coupled_full[i], tau, &f2, e2, mid.phi)
             }
         };
         ok &= new.x[0].is_finite()
