@@ -617,3 +617,24 @@ fn coupling_shifts_the_relaxed_velocity_as_the_resistance_matrix_predicts() {
         }
     }
 }
+
+#[test]
+fn psi_follows_the_body_when_the_relative_velocity_vanishes() {
+    // a relaxed platelet on the zero-velocity line of a shear flow: δv = 0 exactly, so eq 11's
+    // angle is undefined; ψ must stay finite and follow the rotation, ψ = dv_dir − φ
+    let flow = SimpleShear::new(100.0).unwrap();
+    let mut p = one(Shape::default(), ParticleState { omega: -50.0, ..Default::default() });
+    let mut d = Dynamics::new(DynamicsParams { coeff_every: 1, ..params(2.5e-4) }).unwrap();
+    let psi0 = {
+        d.refresh_coefficients(&mut p, &flow, &Jeffery, 0.0).unwrap();
+        p.psi[0]
+    };
+    run(&mut d, &mut p, &flow, &Jeffery, 400);
+    d.refresh_coefficients(&mut p, &flow, &Jeffery, 0.1).unwrap();
+    let (psi, phi) = (p.psi[0], p.phi[0]);
+    assert!(psi.is_finite() && p.trans[0].c_d.is_finite());
+    assert!((p.vx[0], p.vy[0]) == (0.0, 0.0), "δv is exactly zero here");
+    let resid = sonoflow_platelet::dynamics::wrap_angle(psi + phi - p.dv_dir[0]);
+    assert!(resid.abs() < 1e-12, "psi {psi} phi {phi} dir {}", p.dv_dir[0]);
+    assert!((psi - psi0).abs() > 0.1, "the body turned, so ψ changed: {psi0} -> {psi}");
+}

@@ -5,8 +5,10 @@
 //! Newton–Euler, m V' = F, I Ω' = T, X' = V, φ' = Ω, with F and T from the coefficient law of
 //! [`crate::coefficients`] (eq 6 plus the strain torque c_s E'_xy), δv = v − V at the centre of
 //! mass and ψ from eq 11, ψ = ∠(e_x, δv) − φ. When |δv| ≤ [`DynamicsParams::psi_min_speed`]
-//! the angle is undefined and the last ψ is kept (at creation: ψ = ∠(e_x, v) − φ, or −φ in still
-//! fluid).
+//! ∠(e_x, δv) is undefined and the last known direction of δv ([`Particles::dv_dir`]) is used, so
+//! ψ still follows the body's rotation (at creation the direction of the flow, or e_x in still
+//! fluid). A relaxed platelet in a steady flow has δv ≈ 0 (the exact relaxation leaves only
+//! rounding), so this is the common case, not an exception.
 //!
 //! **Stiffness.** For a platelet m/C_d and I/C_r are tens of nanoseconds while the paper's particle
 //! sub-step is 0.25 ms. The default [`Integrator::Exponential`] integrates the linear relaxation
@@ -264,14 +266,13 @@ impl Dynamics {
             let f = flow.velocity([p.x[i], p.y[i]], t);
             let d = [f[0] - p.vx[i], f[1] - p.vy[i]];
             if d[0].hypot(d[1]) > self.params.psi_min_speed {
-                p.psi[i] = d[1].atan2(d[0]) - p.phi[i];
+                p.dv_dir[i] = d[1].atan2(d[0]);
             } else if i >= p.n_trans {
-                // new particle in a relaxed state: the flow direction, or the body axis in still fluid
-                let base = if f[0].hypot(f[1]) > 0.0 { f[1].atan2(f[0]) } else { 0.0 };
-                p.psi[i] = base - p.phi[i];
+                // new particle in a relaxed state: the flow direction, or e_x in still fluid
+                p.dv_dir[i] = if f[0].hypot(f[1]) > 0.0 { f[1].atan2(f[0]) } else { 0.0 };
             }
-            // keep ψ within (−π, π] so that models see a bounded angle
-            p.psi[i] = wrap_angle(p.psi[i]);
+            // eq 11 with the last known direction of δv; within (−π, π] for the models
+            p.psi[i] = wrap_angle(p.dv_dir[i] - p.phi[i]);
         }
         model.translational(&p.shape, &p.psi, &mut p.trans);
         for i in 0..n {
@@ -328,6 +329,7 @@ impl Dynamics {
         if !t.is_finite() {
             return Err(DynamicsError::Invalid { field: "t", value: t, allowed: "finite" });
         }
+        p.check_lengths()?;
         let t0 = Instant::now();
         if self.sub_step_count.is_multiple_of(self.params.coeff_every as u64)
             || p.n_trans < p.len()

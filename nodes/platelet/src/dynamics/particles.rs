@@ -48,6 +48,9 @@ pub struct Particles {
     pub omega: Vec<f64>,
     /// Effective angle of attack ψ (eq 11) at the last coefficient refresh \[rad\].
     pub psi: Vec<f64>,
+    /// Lab-frame angle of δv at the last refresh where |δv| was above the threshold \[rad\]
+    /// (ψ = dv_dir − φ when δv vanishes).
+    pub dv_dir: Vec<f64>,
     /// Translational coefficients at ψ (cached; refreshed every k-th sub-step).
     pub trans: Vec<Translational>,
     /// Rotational coefficients (cached once per particle).
@@ -111,6 +114,7 @@ impl Particles {
             &mut self.vy,
             &mut self.omega,
             &mut self.psi,
+            &mut self.dv_dir,
         ] {
             v.reserve(n);
         }
@@ -142,6 +146,7 @@ impl Particles {
         self.vy.push(s.v[1]);
         self.omega.push(s.omega);
         self.psi.push(-s.phi);
+        self.dv_dir.push(0.0);
         self.trans.push(Translational::default());
         self.rot.push(Rotational::default());
         Ok(i)
@@ -181,6 +186,11 @@ impl Particles {
                 return Err(DynamicsError::State { field, index, value });
             }
         }
+        self.check_lengths()
+    }
+
+    /// All arrays of the same length (O(1)).
+    pub fn check_lengths(&self) -> Result<(), DynamicsError> {
         let n = self.len();
         let lens = [
             self.shape.len(),
@@ -193,6 +203,7 @@ impl Particles {
             self.vy.len(),
             self.omega.len(),
             self.psi.len(),
+            self.dv_dir.len(),
             self.trans.len(),
             self.rot.len(),
         ];
