@@ -7,7 +7,8 @@
 //!
 //! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads [coupled]]]]]`
 //! (N particles, default 165000; collision radius = factor × Lx, default 1 as Remark 1 reads;
-//! `lattice` samples the channel onto a 10 µm lattice and uses eq 12 as Algorithm 2 step 2 does).
+//! `lattice` samples the channel onto a 10 µm lattice and uses eq 12 as Algorithm 2 step 2 does;
+//! `threads` advection workers, default 1; `coupled` turns the rotation–translation coupling on).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -64,7 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let macro_k = params.sub_step * params.sub_steps as f64;
     let mut total = Timings::default();
     println!(
-        "{n} particles, collision radius {factor} Lx, flow: {}",
+        "{n} particles, {threads} advection thread(s), coupling {coupling}, collision radius {factor} Lx, flow: {}",
         if use_lattice { "lattice 10 µm (eq 12)" } else { "analytic channel" }
     );
     println!(

@@ -311,7 +311,7 @@ impl Dynamics {
                 let body = Body { m: p.mass[i], i: p.inertia[i], tr: p.trans[i], rot: p.rot[i], psi: p.psi[i] };
                 let singular = || model_err(i, "c_p", p.trans[i].c_p, "a nonsingular coupled resistance matrix");
                 self.coupled_half[i] = CoupledPropagator::new(&body, 0.5 * tau).ok_or_else(singular)?;
-                self.coupled_full[i] = CoupledPropagator::new(&body, tau).ok_or_else(singular)?;
+                self.coupled_full[i] = self.coupled_half[i].doubled();
             }
         }
         Ok(())
