@@ -5,10 +5,12 @@
 //! `CoefficientModel`). Prints the time split into advection, collisions and coefficient
 //! evaluation. Serial by default (the advection runs on `threads` workers if given).
 //!
-//! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads [coupled]]]]]`
+//! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads [coupled|decoupled [sort|nosort]]]]]]`
 //! (N particles, default 165000; collision radius = factor × Lx, default 1 as Remark 1 reads;
 //! `lattice` samples the channel onto a 10 µm lattice and uses eq 12 as Algorithm 2 step 2 does;
-//! `threads` advection workers, default 1; `coupled` turns the rotation–translation coupling on).
+//! `threads` advection workers, default 1; `coupled` turns the rotation–translation coupling on;
+//! the particles are sorted spatially every macro step unless `nosort`; the sort is counted as
+//! collision time).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -26,6 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let use_lattice = args.get(3).is_some_and(|s| s == "lattice");
     let threads: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(1);
     let coupling = args.get(5).is_some_and(|s| s == "coupled");
+    let spatial_sort = args.get(6).is_none_or(|s| s != "nosort");
     let (length, height) = (12e-3, 2e-3);
     let channel = Channel::default();
     channel.validate()?;
@@ -60,12 +63,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed_s = t_seed.elapsed().as_secs_f64();
 
     // 20 sub-steps of 0.25 ms, coefficients every 10th
-    let params = DynamicsParams { threads, coupling, ..Default::default() };
+    let params = DynamicsParams { threads, coupling, spatial_sort, ..Default::default() };
     let mut d = Dynamics::new(params)?;
     let macro_k = params.sub_step * params.sub_steps as f64;
     let mut total = Timings::default();
     println!(
-        "{n} particles, {threads} advection thread(s), coupling {coupling}, collision radius {factor} Lx, flow: {}",
+        "{n} particles, {threads} advection thread(s), coupling {coupling}, spatial sort {spatial_sort}, collision radius {factor} Lx, flow: {}",
         if use_lattice { "lattice 10 µm (eq 12)" } else { "analytic channel" }
     );
     println!(

@@ -26,6 +26,8 @@ pub struct ParticleState {
 /// checks them (finite) at the start of every macro step.
 #[derive(Clone, Debug, Default)]
 pub struct Particles {
+    /// Identity: the order of [`Particles::push`] (0, 1, …); kept through [`Particles::permute`].
+    pub id: Vec<u64>,
     /// Shape parameters.
     pub shape: Vec<Shape>,
     /// Mass m \[kg\] (cached from the shape and density).
@@ -49,7 +51,7 @@ pub struct Particles {
     /// Effective angle of attack ψ (eq 11) at the last coefficient refresh \[rad\].
     pub psi: Vec<f64>,
     /// Lab-frame angle of δv at the last refresh where |δv| was above the threshold \[rad\]
-    /// (ψ = dv_dir − φ when δv vanishes).
+    /// (ψ = dv_dir − φ when δv vanishes); NaN before the particle's first refresh.
     pub dv_dir: Vec<f64>,
     /// Translational coefficients at ψ (cached; refreshed every k-th sub-step).
     pub trans: Vec<Translational>,
@@ -59,6 +61,8 @@ pub struct Particles {
     density: f64,
     /// Collision radius / Lx.
     radius_factor: f64,
+    /// Next identity.
+    next_id: u64,
     /// Particles [0, n_rot) have rotational coefficients.
     pub(crate) n_rot: usize,
     /// Particles [0, n_trans) have translational coefficients.
@@ -119,6 +123,7 @@ impl Particles {
             v.reserve(n);
         }
         self.shape.reserve(n);
+        self.id.reserve(n);
         self.trans.reserve(n);
         self.rot.reserve(n);
     }
@@ -135,6 +140,8 @@ impl Particles {
                 return Err(DynamicsError::State { field, index: i, value: v });
             }
         }
+        self.id.push(self.next_id);
+        self.next_id += 1;
         self.shape.push(shape);
         self.mass.push(shape.mass(self.density));
         self.inertia.push(shape.inertia_z_centre(self.density));
@@ -146,7 +153,7 @@ impl Particles {
         self.vy.push(s.v[1]);
         self.omega.push(s.omega);
         self.psi.push(-s.phi);
-        self.dv_dir.push(0.0);
+        self.dv_dir.push(f64::NAN); // unknown until the first refresh
         self.trans.push(Translational::default());
         self.rot.push(Rotational::default());
         Ok(i)
@@ -189,11 +196,60 @@ impl Particles {
         self.check_lengths()
     }
 
+    /// Reorders the particles: new index i holds old particle `order[i]`. `order` must be a
+    /// permutation of 0..len. Cached coefficients move along; if some particle had none yet, all
+    /// are re-evaluated at the next sub-step.
+    pub fn permute(&mut self, order: &[u32]) -> Result<(), DynamicsError> {
+        let n = self.len();
+        let mut seen = vec![false; n];
+        let bad =
+            DynamicsError::Invalid { field: "order", value: order.len() as f64, allowed: "a permutation of 0..len" };
+        if order.len() != n {
+            return Err(bad);
+        }
+        for &k in order {
+            let k = k as usize;
+            if k >= n || seen[k] {
+                return Err(bad);
+            }
+            seen[k] = true;
+        }
+        fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
+            let new: Vec<T> = order.iter().map(|&k| v[k as usize]).collect();
+            *v = new;
+        }
+        apply(&mut self.id, order);
+        apply(&mut self.shape, order);
+        for v in [
+            &mut self.mass,
+            &mut self.inertia,
+            &mut self.radius,
+            &mut self.x,
+            &mut self.y,
+            &mut self.phi,
+            &mut self.vx,
+            &mut self.vy,
+            &mut self.omega,
+            &mut self.psi,
+            &mut self.dv_dir,
+        ] {
+            apply(v, order);
+        }
+        apply(&mut self.trans, order);
+        apply(&mut self.rot, order);
+        if self.n_rot < n || self.n_trans < n {
+            self.n_rot = 0;
+            self.n_trans = 0;
+        }
+        Ok(())
+    }
+
     /// All arrays of the same length (O(1)).
     pub fn check_lengths(&self) -> Result<(), DynamicsError> {
         let n = self.len();
         let lens = [
             self.shape.len(),
+            self.id.len(),
             self.mass.len(),
             self.inertia.len(),
             self.radius.len(),
