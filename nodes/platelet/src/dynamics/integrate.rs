@@ -340,7 +340,7 @@ fn exp_phi1_3(x: &M3, tau: f64) -> (M3, M3) {
             }
         }
     }
-    let mut tsub = tau * scale;
+    let tsub = tau * scale;
     for row in p.iter_mut() {
         for v in row.iter_mut() {
             *v *= tsub;
@@ -354,9 +354,7 @@ fn exp_phi1_3(x: &M3, tau: f64) -> (M3, M3) {
             }
         }
         e = matmul3(&e, &e);
-        tsub *= 2.0;
     }
-    let _ = tsub;
     (e, p)
 }
 
