@@ -3,10 +3,12 @@
 //! This crate holds the algorithms without any IPC. So far: the shape model of section 4.1
 //! ([`shape`]), the coefficient interface of eq 6 ([`coefficients`]), closed forms of spheroids
 //! ([`spheroid`]), a boundary-element Stokes solver for the resolved runs of section 4.3
-//! ([`stokes`]), the training data ([`dataset`]) and the networks of sections 4.2–4.4 ([`nn`]).
+//! ([`stokes`]), the training data ([`dataset`]), the 2-D particle dynamics
+//! ([`dynamics`]) and the networks of sections 4.2–4.4 ([`nn`]).
 
 pub mod coefficients;
 pub mod dataset;
+pub mod dynamics;
 pub mod nn;
 pub mod shape;
 pub mod spheroid;

@@ -103,7 +103,10 @@ pub(crate) fn gauss_legendre_01(n: usize) -> Vec<(f64, f64)> {
 /// ∫₀¹ f(s) ds for f = sᵃ h(s)ᵇ (h = √((1 − s)(α + (1 − α)s))), with s = 1 − u².
 fn moment(alpha: f64, a: i32, b: i32) -> f64 {
     // h = u √g, ds = 2u du: integrand 2u (1 − u²)ᵃ uᵇ g^{b/2}, smooth for g > 0
-    gauss_legendre_01(24)
+    // the nodes are computed once (Newton iterations per node are far costlier than the sum)
+    static NODES: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
+    NODES
+        .get_or_init(|| gauss_legendre_01(24))
         .iter()
         .map(|&(u, w)| {
             let s = 1.0 - u * u;

@@ -1,0 +1,109 @@
+//! The training data generator: seeded per-index shapes, resumable file, eq 18 targets.
+use std::io::Write;
+
+use sonoflow_platelet::dataset::{draw_shape, generate, load, network_datasets, GenerateOptions, Set, GENERALISATION_LIMITS};
+use sonoflow_platelet::nn::model::{eq18_factors, rotational_from_si, translational_from_si};
+use sonoflow_platelet::shape::BOUNDS;
+use sonoflow_platelet::{Outer, StokesOptions};
+
+fn quick() -> GenerateOptions {
+    // coarse and in free space: this tests the bookkeeping, not the solver
+    GenerateOptions {
+        n_shapes: 4,
+        n_generalisation: 2,
+        seed: 7,
+        threads: 2,
+        stokes: StokesOptions { n_beta: 6, outer: Outer::FreeSpace, ..StokesOptions::default() },
+    }
+}
+
+#[test]
+fn shapes_are_seeded_per_index_and_sets_respect_their_bounds() {
+    assert_eq!(draw_shape(1, Set::InBounds, 5), draw_shape(1, Set::InBounds, 5));
+    assert_ne!(draw_shape(1, Set::InBounds, 5), draw_shape(1, Set::InBounds, 6));
+    assert_ne!(draw_shape(1, Set::InBounds, 5), draw_shape(2, Set::InBounds, 5));
+    for i in 0..200 {
+        let s = draw_shape(3, Set::InBounds, i);
+        assert!(s.check_bounds().is_ok(), "{s:?}");
+        let g = draw_shape(3, Set::Generalisation, i);
+        assert!(g.check_bounds().is_err(), "generalisation shape inside eq 7: {g:?}");
+        let v = [g.lx, g.ly, g.lz, g.alpha_top, g.alpha_bot];
+        for (x, (name, lo, hi)) in v.iter().zip(GENERALISATION_LIMITS) {
+            assert!((lo..=hi).contains(x), "{name} = {x} outside [{lo}, {hi}]");
+        }
+    }
+    assert_eq!(BOUNDS.len(), 5);
+}
+
+#[test]
+fn generation_resumes_after_a_torn_line_and_rejects_other_options() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("d.jsonl");
+    let opts = quick();
+    let noop = |_: u64, _: u64| {};
+    let first = generate(&path, &opts, &noop).expect("generate");
+    assert_eq!(first.len(), 6);
+    // Simulate an interrupted run: keep the header and two records, then half a line.
+    let text = std::fs::read_to_string(&path).expect("read");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 7);
+    let mut f = std::fs::File::create(&path).expect("rewrite");
+    for l in &lines[..3] {
+        writeln!(f, "{l}").expect("write");
+    }
+    write!(f, "{}", &lines[3][..lines[3].len() / 2]).expect("write torn");
+    drop(f);
+    let solved = std::sync::atomic::AtomicU64::new(0);
+    let count = |_: u64, total: u64| {
+        solved.store(total, std::sync::atomic::Ordering::Relaxed);
+    };
+    let second = generate(&path, &opts, &count).expect("resume");
+    assert_eq!(solved.load(std::sync::atomic::Ordering::Relaxed), 4, "only the 4 missing shapes are solved");
+    assert_eq!(second.len(), 6);
+    for (a, b) in first.iter().zip(&second) {
+        assert_eq!((a.set, a.index, a.shape), (b.set, b.index, b.shape));
+        assert_eq!(a.resistance.force_per_flow, b.resistance.force_per_flow, "solves are deterministic");
+    }
+    assert_eq!(load(&path).expect("load").len(), 6);
+    // Another seed on the same file is refused, not mixed in.
+    let e = generate(&path, &GenerateOptions { seed: 8, ..opts.clone() }, &noop).unwrap_err();
+    assert!(e.to_string().contains("generated with"), "{e}");
+    let e = generate(&path, &GenerateOptions { threads: 0, ..opts }, &noop).unwrap_err();
+    assert!(e.to_string().contains("threads"), "{e}");
+}
+
+#[test]
+fn network_targets_are_eq_18_of_the_solved_resistance() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("d.jsonl");
+    let records = generate(&path, &GenerateOptions { n_generalisation: 0, ..quick() }, &|_, _| {}).expect("generate");
+    let refs: Vec<_> = records.iter().collect();
+    let d = network_datasets(&refs, 3, 1).expect("datasets");
+    assert_eq!((d.n.len(), d.n_r.len(), d.n_s.len()), (12, 4, 4));
+    for (k, r) in records.iter().enumerate() {
+        for a in 0..3 {
+            let row = 3 * k + a;
+            let x = &d.n.inputs()[6 * row..6 * row + 6];
+            assert!((x[0] - r.shape.lx * 1e6).abs() < 1e-12 && (x[3] - r.shape.alpha_top).abs() < 1e-15);
+            let psi = x[5];
+            // independent: D, L, T from the resistance tensor by hand, divided by eq 18's factors
+            let k2 = r.resistance.force_per_flow;
+            let (s, c) = psi.sin_cos();
+            let f = [k2[0][0] * c + k2[0][1] * s, k2[1][0] * c + k2[1][1] * s];
+            let drag = (f[0] * c + f[1] * s) * 1e-6 / 1e-15;
+            let lift = (-f[0] * s + f[1] * c) * 1e-6 / 1e-15;
+            let y = &d.n.targets()[3 * row..3 * row + 3];
+            let fac = eq18_factors(psi);
+            assert!((y[0] * fac[0] - drag).abs() < 1e-9 * drag.abs(), "{} vs {drag}", y[0] * fac[0]);
+            assert!((y[1] * fac[1] - lift).abs() < 1e-9 * drag.abs());
+            // the angle is away from the zeros of sin 2ψ and cos ψ
+            assert!(fac[1].abs() > 1e-2 * 1e-1 && fac[2].abs() > 1e-3);
+            let raw = translational_from_si(&r.resistance.translational(psi));
+            assert!((raw[0] - drag).abs() < 1e-9 * drag.abs());
+        }
+        let [t_r, t_s] = rotational_from_si(&r.resistance.rotational());
+        assert!((d.n_r.targets()[k] * 800.0 - t_r).abs() < 1e-9 * t_r.abs());
+        assert!((d.n_s.targets()[k] * 800.0 - t_s).abs() < 1e-9 * t_s.abs().max(1e-30));
+    }
+    assert!(network_datasets(&refs, 0, 1).is_err());
+}
