@@ -1,8 +1,8 @@
 //! Paper 2 section 5.2 performance test of the particle dynamics: ~165 000 platelets with shapes
 //! from `ShapeSampler` seeded uniformly in a 2 mm × 12 mm channel with the parabolic flow (the 25 %
 //! stenosis comes later), 10 macro steps × 20 sub-steps of 0.25 ms, coefficients every 10th
-//! sub-step from the closed-form `DiscStandIn` (the trained networks plug in through
-//! `CoefficientModel`). Prints the time split into advection, collisions and coefficient
+//! sub-step from the trained networks in `nodes/platelet/weights` (`MODEL=standin`: the
+//! closed-form `DiscStandIn`). Prints the time split into advection, collisions and coefficient
 //! evaluation. Serial by default (the advection runs on `threads` workers if given).
 //!
 //! `cargo run --release -p sonoflow-platelet --example platelet_bench [-- N [radius_factor [analytic|lattice [threads [coupled|decoupled [sort|nosort]]]]]]`
@@ -47,7 +47,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         &channel
     };
-    let model = DiscStandIn::default();
+    // The trained networks shipped in `nodes/platelet/weights` (MODEL=standin: the closed-form
+    // stand-in instead).
+    let standin = DiscStandIn::default();
+    let network;
+    let model: &dyn sonoflow_platelet::CoefficientModel = if std::env::var("MODEL").is_ok_and(|m| m == "standin") {
+        &standin
+    } else {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("weights");
+        network = sonoflow_platelet::nn::model::NetworkModel::load_dir(&dir)?;
+        &network
+    };
     let sampler = ShapeSampler::default();
     let mut rng = ChaCha8Rng::seed_from_u64(2024);
 
@@ -77,7 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let t_run = Instant::now();
     for step in 0..10 {
-        let tm = d.macro_step(&mut p, flow, &model, step as f64 * macro_k)?;
+        let tm = d.macro_step(&mut p, flow, model, step as f64 * macro_k)?;
         println!(
             "{:>5} {:>10.3} {:>10.3} {:>12.3} {:>8} {:>9}",
             step,
@@ -96,7 +106,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (name, s) in [
         ("advection", total.advection.as_secs_f64()),
         ("collisions + walls", total.collisions.as_secs_f64()),
-        ("coefficients (stand-in)", total.coefficients.as_secs_f64()),
+        (
+            if model.name() == "network" { "coefficients (networks)" } else { "coefficients (stand-in)" },
+            total.coefficients.as_secs_f64(),
+        ),
         ("all 200 sub-steps", run_s),
     ] {
         println!("{name:<28} {s:>9.3} {:>18.1}", per(s));

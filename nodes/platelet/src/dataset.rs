@@ -157,7 +157,8 @@ pub fn draw_shape(seed: u64, set: Set, index: u64) -> Shape {
                     // a normal with a finite positive std always constructs
                     *x = Normal::new(mean[k], std[k]).map(|n| n.sample(&mut rng)).unwrap_or(mean[k]);
                 }
-                let inside = |lim: &[(&str, f64, f64); 5]| v.iter().zip(lim).all(|(x, (_, lo, hi))| (*lo..=*hi).contains(x));
+                let inside =
+                    |lim: &[(&str, f64, f64); 5]| v.iter().zip(lim).all(|(x, (_, lo, hi))| (*lo..=*hi).contains(x));
                 if inside(&GENERALISATION_LIMITS) && !inside(&BOUNDS) {
                     return Shape { lx: v[0], ly: v[1], lz: v[2], alpha_top: v[3], alpha_bot: v[4] };
                 }
@@ -213,7 +214,11 @@ pub type Progress<'a> = &'a (dyn Fn(u64, u64) + Sync);
 /// sorted by (set, index).
 pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> Result<Vec<Record>, DataError> {
     if !(1..=1_000_000).contains(&opts.n_shapes) {
-        return Err(DataError::Option { field: "n_shapes", value: opts.n_shapes.to_string(), allowed: "1 ..= 1000000" });
+        return Err(DataError::Option {
+            field: "n_shapes",
+            value: opts.n_shapes.to_string(),
+            allowed: "1 ..= 1000000",
+        });
     }
     if opts.n_generalisation > 1_000_000 {
         return Err(DataError::Option {

@@ -1,7 +1,9 @@
 //! The training data generator: seeded per-index shapes, resumable file, eq 18 targets.
 use std::io::Write;
 
-use sonoflow_platelet::dataset::{draw_shape, generate, load, network_datasets, GenerateOptions, Set, GENERALISATION_LIMITS};
+use sonoflow_platelet::dataset::{
+    draw_shape, generate, load, network_datasets, GenerateOptions, Set, GENERALISATION_LIMITS,
+};
 use sonoflow_platelet::nn::model::{eq18_factors, rotational_from_si, translational_from_si};
 use sonoflow_platelet::shape::BOUNDS;
 use sonoflow_platelet::{Outer, StokesOptions};

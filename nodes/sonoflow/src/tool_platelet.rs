@@ -92,7 +92,8 @@ fn data(a: &DataArgs) -> anyhow::Result<i32> {
         },
         ..defaults
     };
-    let opts = GenerateOptions { n_shapes: a.shapes, n_generalisation: a.generalisation, seed: a.seed, threads, stokes };
+    let opts =
+        GenerateOptions { n_shapes: a.shapes, n_generalisation: a.generalisation, seed: a.seed, threads, stokes };
     let t0 = Instant::now();
     let last = std::sync::Mutex::new(Instant::now());
     let progress = |done: u64, total: u64| {
@@ -167,9 +168,17 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
             SetErrors { set: "test".into(), n: pick(&dte).len(), per_output: evaluate(&net, pick(&dte))? },
         ];
         if let Some(g) = &dg {
-            sets.push(SetErrors { set: "generalisation".into(), n: pick(g).len(), per_output: evaluate(&net, pick(g))? });
+            sets.push(SetErrors {
+                set: "generalisation".into(),
+                n: pick(g).len(),
+                per_output: evaluate(&net, pick(g))?,
+            });
         }
-        eprintln!("platelet train: {name} trained in {:.1} s ({} epochs)", t.elapsed().as_secs_f64(), outcome.epochs_run);
+        eprintln!(
+            "platelet train: {name} trained in {:.1} s ({} epochs)",
+            t.elapsed().as_secs_f64(),
+            outcome.epochs_run
+        );
         reports.push(TrainingReport {
             network: name.into(),
             sizes: sizes.clone(),
