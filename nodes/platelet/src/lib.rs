@@ -9,6 +9,7 @@
 pub mod coefficients;
 pub mod dataset;
 pub mod dynamics;
+pub mod experiments;
 pub mod nn;
 pub mod shape;
 pub mod spheroid;

@@ -204,7 +204,7 @@ fn explicit_diverges_at_the_paper_step_while_exponential_is_stable() {
     let model = DiscStandIn::default();
     let (mut d, mut p, flow) = stiff_case(false, Integrator::ExplicitEuler, 2.5e-4);
     d.refresh_coefficients(&mut p, &flow, &model, 0.0).unwrap();
-    let body = Body { m: p.mass[0], i: p.inertia[0], tr: p.trans[0], rot: p.rot[0], psi: p.psi[0] };
+    let body = Body { m: p.mass[0], i: p.inertia[0], tr: p.trans[0], rot: p.rot[0], psi: p.psi[0], c_x: p.coupling[0] };
     let limit = explicit_limit(&body);
     println!("explicit stability limit: {limit:.3e} s (paper sub-step 2.5e-4 s)");
     assert!(limit < 1e-6 && limit > 1e-9);
@@ -254,7 +254,8 @@ fn explicit_and_exponential_agree_at_a_tiny_step() {
     for coupling in [false, true] {
         let (mut d, mut p, flow) = stiff_case(coupling, Integrator::Exponential, 1.0);
         d.refresh_coefficients(&mut p, &flow, &model, 0.0).unwrap();
-        let body = Body { m: p.mass[0], i: p.inertia[0], tr: p.trans[0], rot: p.rot[0], psi: p.psi[0] };
+        let body =
+            Body { m: p.mass[0], i: p.inertia[0], tr: p.trans[0], rot: p.rot[0], psi: p.psi[0], c_x: p.coupling[0] };
         let h = explicit_limit(&body) / 2000.0;
         let n = 20000; // ~ 20 relaxation times
         let (mut de, mut pe, _) = stiff_case(coupling, Integrator::Exponential, h);
@@ -516,8 +517,10 @@ fn bad_inputs_give_clear_errors() {
         }
     }
     let mut dc = Dynamics::new(DynamicsParams { coupling: true, ..Default::default() }).unwrap();
-    let e = dc.macro_step(&mut p, &flow, &Pitchy, 0.0).unwrap_err();
-    assert!(e.to_string().contains("c_p^2 < c_d c_r"), "{e}");
+    let mut pc = Particles::new(DEFAULT_DENSITY, 1.0).unwrap();
+    pc.push(Shape::default(), ParticleState::default()).unwrap();
+    let e = dc.macro_step(&mut pc, &flow, &Pitchy, 0.0).unwrap_err();
+    assert!(e.to_string().contains("c_x^2 < c_d c_r"), "{e}");
 
     // flows
     assert!(matches!(SimpleShear::new(f64::NAN), Err(FlowError::Invalid { field: "shear_rate", .. })));

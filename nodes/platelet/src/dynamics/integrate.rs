@@ -135,6 +135,8 @@ pub struct Body {
     pub rot: Rotational,
     /// ψ at the last refresh \[rad\].
     pub psi: f64,
+    /// Coupling along the body x axis c_x = C_p(ψ = 0) \[kg·m/s\] (only used with the coupling on).
+    pub c_x: f64,
 }
 
 /// One exactly relaxed step of eq 6 (no coupling) from `k` with frozen flow `f` and body strain
@@ -158,11 +160,12 @@ pub fn relax_decoupled(k: &Kin, b: &Body, pr: &Propagator, tau: f64, f: &FlowSam
     }
 }
 
-/// Lab-frame direction of the coupling vector: the direction of δv at the last refresh, φ + ψ.
+/// Lab-frame coupling vector: c_x along the body's x axis (orientation φ). Then c · δv =
+/// c_x |δv| cos ψ = C_p |δv| for a mirror-symmetric body (no body-y component).
 #[inline]
 fn coupling_vector(b: &Body, phi: f64) -> [f64; 2] {
-    let (s, c) = (phi + b.psi).sin_cos();
-    [b.tr.c_p * c, b.tr.c_p * s]
+    let (s, c) = phi.sin_cos();
+    [b.c_x * c, b.c_x * s]
 }
 
 /// Forces and torque of eq 6 (plus the coupling force c (ω − Ω) and T_p = c · δv if `coupled`).
@@ -254,8 +257,8 @@ fn expm6(b: &M6) -> M6 {
 }
 
 /// One exactly relaxed step with the rotation–translation coupling: resistance matrix
-/// R = [[C_d, −C_l, c_x], [C_l, C_d, c_y], [c_x, c_y, C_r]] on (δv, ω − Ω), c = C_p (cos(φ+ψ),
-/// sin(φ+ψ)); w = (V, Ω) relaxes to w_eq = (u, ω) + R⁻¹ (0, 0, C_s E') at rate A = M⁻¹R.
+/// R = [[C_d, −C_l, c_1], [C_l, C_d, c_2], [c_1, c_2, C_r]] on (δv, ω − Ω), c = c_x (cos φ_c,
+/// sin φ_c) (the body x axis); w = (V, Ω) relaxes to w_eq = (u, ω) + R⁻¹ (0, 0, C_s E') at rate A = M⁻¹R.
 /// `None` if R is singular.
 pub fn relax_coupled(k: &Kin, b: &Body, tau: f64, f: &FlowSample, e_body: f64, phi_c: f64) -> Option<Kin> {
     let c = coupling_vector(b, phi_c);
@@ -359,9 +362,10 @@ fn exp_phi1_3(x: &M3, tau: f64) -> (M3, M3) {
 }
 
 /// The coupled propagator of one particle for one step length τ, in the frame rotated by
-/// θ = φ + ψ: there the coupling vector is (C_p, 0) and, since C_d I + C_l J commutes with
-/// rotations, the resistance matrix R' = [[C_d, −C_l, C_p], [C_l, C_d, 0], [C_p, 0, C_r]] does not
-/// depend on φ. Constant between coefficient refreshes.
+/// θ = φ + ψ (the direction of δv at the refresh): there the body x axis is at −ψ, the coupling
+/// vector is c_x (cos ψ, −sin ψ) and, since C_d I + C_l J commutes with rotations, the resistance
+/// matrix R' = [[C_d, −C_l, c_x cos ψ], [C_l, C_d, −c_x sin ψ], [c_x cos ψ, −c_x sin ψ, C_r]] does
+/// not depend on φ. Constant between coefficient refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CoupledPropagator {
     /// e^{−A'τ}, A' = M⁻¹R'.
@@ -375,8 +379,10 @@ pub struct CoupledPropagator {
 impl CoupledPropagator {
     /// `None` if R' is singular.
     pub fn new(b: &Body, tau: f64) -> Option<Self> {
-        let (cd, cl, cp, cr) = (b.tr.c_d, b.tr.c_l, b.tr.c_p, b.rot.c_r);
-        let r = [[cd, -cl, cp], [cl, cd, 0.0], [cp, 0.0, cr]];
+        let (cd, cl, cr) = (b.tr.c_d, b.tr.c_l, b.rot.c_r);
+        let (sp, cpsi) = b.psi.sin_cos();
+        let (c1, c2) = (b.c_x * cpsi, -b.c_x * sp);
+        let r = [[cd, -cl, c1], [cl, cd, c2], [c1, c2, cr]];
         let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
             + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
         if !(det.is_finite() && det != 0.0) {
@@ -475,6 +481,7 @@ mod tests {
             tr: Translational { c_d: 7e-8, c_l: 1e-8, c_p: 3e-14 },
             rot: Rotational { c_r: 1e-19, c_s: 0.5e-19 },
             psi: 0.3,
+            c_x: 3e-14,
         };
         let k = Kin { x: [1e-3, 2e-4], phi: 0.4, v: [1e-3, -2e-3], omega: 3.0 };
         let f = FlowSample { v: [2e-3, 1e-4], omega: -1.5, strain: [0.0, 1.5, 0.0] };
@@ -504,6 +511,7 @@ mod tests {
             tr: Translational { c_d: 7e-8, c_l: 1e-8, c_p: 3e-14 },
             rot: Rotational { c_r: 1e-19, c_s: 0.5e-19 },
             psi: 0.3,
+            c_x: 3e-14,
         };
         let k = Kin { x: [1e-3, 2e-4], phi: 0.4, v: [1e-3, -2e-3], omega: 3.0 };
         let f = FlowSample { v: [2e-3, 1e-4], omega: -1.5, strain: [0.0, 1.5, 0.0] };
@@ -554,6 +562,7 @@ mod tests {
             tr: Translational { c_d: 7e-8, c_l: 1e-8, c_p: 3e-14 },
             rot: Rotational { c_r: 2.5e-19, c_s: 1e-19 },
             psi: 0.7,
+            c_x: 3e-14,
         };
         let k = Kin { phi: 0.4, ..Default::default() };
         let unit = |v: [f64; 2], w: f64| FlowSample { v, omega: w, strain: [0.0; 3] };
@@ -568,9 +577,9 @@ mod tests {
                 }
             }
         }
-        // the coupling vector is C_p along the lab direction φ + ψ of the refreshed δv
+        // the coupling vector is c_x along the body's x axis (lab direction φ = 0.4)
         let (fw, _) = force_torque(&k, &b, &unit([0.0, 0.0], 1.0), 0.0, true);
-        let want = [b.tr.c_p * (1.1f64).cos(), b.tr.c_p * (1.1f64).sin()];
+        let want = [b.c_x * (0.4f64).cos(), b.c_x * (0.4f64).sin()];
         assert!((fw[0] - want[0]).abs() < 1e-27 && (fw[1] - want[1]).abs() < 1e-27);
     }
 
@@ -583,6 +592,7 @@ mod tests {
             tr: Translational { c_d: 7e-8, c_l: 1e-8, c_p: 0.0 },
             rot: Rotational { c_r: 1e-19, c_s: 0.5e-19 },
             psi: 0.3,
+            c_x: 0.0,
         };
         let k = Kin { x: [1e-3, 2e-4], phi: 0.4, v: [1e-3, -2e-3], omega: 3.0 };
         let f = FlowSample { v: [2e-3, 1e-4], omega: -1.5, strain: [0.0, 1.5, 0.0] };

@@ -19,13 +19,13 @@
 //! **Rotation–translation coupling** ([`DynamicsParams::coupling`]). Lorentz reciprocity makes the
 //! 3 × 3 resistance matrix relating (F, T) to (δv, ω − Ω) symmetric, so a pitching torque C_p
 //! (centre of pressure ≠ centre of mass) implies a force c (ω − Ω) from relative rotation, with
-//! c the coupling vector; eq 6 omits it. With the option on, c = C_p (cos(φ + ψ), sin(φ + ψ)) (C_p
-//! along the direction of δv at the last refresh: a single evaluation of C_p only gives the
-//! component of c along δv) and T_p = c · δv; the resistance matrix must then be positive
-//! definite, C_p² < C_d C_r, or the step is refused. **Default: off**, so that the default model is
-//! eq 6 as the paper writes it and as its networks were trained (C_p |δv|), and because the
-//! direction of c is an assumption; turn it on to study the oscillatory y-motion of asymmetric
-//! particles (section 5.1.5).
+//! c the coupling vector; eq 6 omits it. The platelet is mirror-symmetric in its x → −x plane,
+//! so c has no component along the body's y axis: c = c_x (cos φ, sin φ) with c_x = C_p(ψ = 0),
+//! evaluated once per particle ([`Particles::coupling`]), and T_p = c · δv = c_x |δv| cos ψ, which
+//! is eq 6's pitching torque for the networks' C_p(ψ) ∝ cos ψ. The resistance matrix must then be
+//! positive definite, c_x² < C_d C_r, or the step is refused. **Default: off**, so that the
+//! default model is eq 6 as the paper writes it; turn it on to study the oscillatory y-motion of
+//! asymmetric particles (section 5.1.5).
 //!
 //! **Sub-cycling** (Algorithm 2): [`Dynamics::macro_step`] runs M sub-steps of length k/M; the
 //! translational coefficients are refreshed for all particles in one batch call of the
@@ -278,6 +278,16 @@ impl Dynamics {
                     return Err(model_err(i, "c_s", r.c_s, "finite"));
                 }
             }
+            // the coupling along the body x axis: C_p at ψ = 0 (see `Particles::coupling`)
+            let zeros = vec![0.0; n - from];
+            let mut at0 = vec![crate::coefficients::Translational::default(); n - from];
+            model.translational(&p.shape[from..], &zeros, &mut at0);
+            for (k, c) in at0.iter().enumerate() {
+                if !c.c_p.is_finite() {
+                    return Err(model_err(from + k, "c_p", c.c_p, "finite"));
+                }
+                p.coupling[from + k] = c.c_p;
+            }
             p.n_rot = n;
         }
         for i in 0..n {
@@ -304,12 +314,12 @@ impl Dynamics {
             if !c.c_p.is_finite() {
                 return Err(model_err(i, "c_p", c.c_p, "finite"));
             }
-            if self.params.coupling && c.c_p * c.c_p >= c.c_d * p.rot[i].c_r {
+            if self.params.coupling && p.coupling[i] * p.coupling[i] >= c.c_d * p.rot[i].c_r {
                 return Err(model_err(
                     i,
                     "c_p",
-                    c.c_p,
-                    "c_p^2 < c_d c_r with the coupling on (positive definite resistance matrix)",
+                    p.coupling[i],
+                    "c_x^2 < c_d c_r with the coupling on (positive definite resistance matrix)",
                 ));
             }
         }
@@ -326,7 +336,14 @@ impl Dynamics {
             self.coupled_half.resize(n, CoupledPropagator::default());
             self.coupled_full.resize(n, CoupledPropagator::default());
             for i in 0..n {
-                let body = Body { m: p.mass[i], i: p.inertia[i], tr: p.trans[i], rot: p.rot[i], psi: p.psi[i] };
+                let body = Body {
+                    m: p.mass[i],
+                    i: p.inertia[i],
+                    tr: p.trans[i],
+                    rot: p.rot[i],
+                    psi: p.psi[i],
+                    c_x: p.coupling[i],
+                };
                 let singular = || model_err(i, "c_p", p.trans[i].c_p, "a nonsingular coupled resistance matrix");
                 self.coupled_half[i] = CoupledPropagator::new(&body, 0.5 * tau).ok_or_else(singular)?;
                 self.coupled_full[i] = self.coupled_half[i].doubled();
@@ -449,6 +466,7 @@ impl Dynamics {
             trans: &p.trans,
             rot: &p.rot,
             psi: &p.psi,
+            coupling: &p.coupling,
             half: &self.half,
             full: &self.full,
             coupled_half: &self.coupled_half,
@@ -503,6 +521,7 @@ struct ReadOnly<'a> {
     trans: &'a [crate::coefficients::Translational],
     rot: &'a [crate::coefficients::Rotational],
     psi: &'a [f64],
+    coupling: &'a [f64],
     half: &'a [Propagator],
     full: &'a [Propagator],
     coupled_half: &'a [CoupledPropagator],
@@ -529,7 +548,14 @@ fn advect_chunk(
     for l in 0..xs.len() {
         let i = off + l;
         let k = Kin { x: [xs[l], ys[l]], phi: phis[l], v: [vxs[l], vys[l]], omega: oms[l] };
-        let b = Body { m: ro.mass[i], i: ro.inertia[i], tr: ro.trans[i], rot: ro.rot[i], psi: ro.psi[i] };
+        let b = Body {
+            m: ro.mass[i],
+            i: ro.inertia[i],
+            tr: ro.trans[i],
+            rot: ro.rot[i],
+            psi: ro.psi[i],
+            c_x: ro.coupling[i],
+        };
         let f1 = flow.sample(k.x, t);
         let (s1, c1) = (2.0 * k.phi).sin_cos();
         let e1 = f1.body_strain_xy_sc(s1, c1);

@@ -57,6 +57,10 @@ pub struct Particles {
     pub trans: Vec<Translational>,
     /// Rotational coefficients (cached once per particle).
     pub rot: Vec<Rotational>,
+    /// Coupling c_x \[kg·m/s\]: the pitching torque per unit relative velocity along the body's x
+    /// axis, C_p at ψ = 0 (cached with `rot`; by the x → −x mirror symmetry of the shape the
+    /// coupling vector has no body-y component, so T_p = c_x |δv| cos ψ).
+    pub coupling: Vec<f64>,
     /// Density ρ_p \[kg/m³\] used for mass and inertia.
     density: f64,
     /// Collision radius / Lx.
@@ -119,6 +123,7 @@ impl Particles {
             &mut self.omega,
             &mut self.psi,
             &mut self.dv_dir,
+            &mut self.coupling,
         ] {
             v.reserve(n);
         }
@@ -156,6 +161,7 @@ impl Particles {
         self.dv_dir.push(f64::NAN); // unknown until the first refresh
         self.trans.push(Translational::default());
         self.rot.push(Rotational::default());
+        self.coupling.push(f64::NAN);
         Ok(i)
     }
 
@@ -232,6 +238,7 @@ impl Particles {
             &mut self.omega,
             &mut self.psi,
             &mut self.dv_dir,
+            &mut self.coupling,
         ] {
             apply(v, order);
         }
@@ -262,6 +269,7 @@ impl Particles {
             self.dv_dir.len(),
             self.trans.len(),
             self.rot.len(),
+            self.coupling.len(),
         ];
         if lens.iter().any(|&l| l != n) {
             return Err(DynamicsError::Invalid {
