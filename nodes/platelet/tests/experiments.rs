@@ -14,13 +14,13 @@ fn five_particles_follow_their_streamline_in_jeffery_orbits() {
     let tr = run(&m, &RunOptions { t_end: 30.0, record_every: 40, dynamics: DynamicsParams::default() }).expect("run");
     // γ̇ at y0 = 0.5176 mm of the paper's profile: 2 v_in (1 − 2 y0/H)/H
     assert!((tr.shear_rate - 2.0 * 5e-3 * (1.0 - 2.0 * Y0 / 2e-3) / 2e-3).abs() < 1e-12);
-    for k in 0..5 {
+    for (k, bk) in b.iter().enumerate() {
         // eq 6 with the exact relaxation: δv → 0, the centre of mass stays on its streamline
         let dev = tr.y[k].iter().fold(0.0f64, |a, y| a.max((y - Y0).abs()));
         assert!(dev < 1e-12, "particle {}: y moved {dev} m", k + 1);
         // rotation: Jeffery's period with the networks' B = c_s / c_r (particle 3, the slowest,
         // turns less than once in 30 s: checked on its half turns)
-        let want = jeffery_period(tr.shear_rate, b[k]);
+        let want = jeffery_period(tr.shear_rate, *bk);
         if let Some(got) = rotation_period(&tr.t, &tr.phi[k]) {
             assert!((got - want).abs() < 2e-3 * want, "particle {}: period {got} vs {want}", k + 1);
         } else {

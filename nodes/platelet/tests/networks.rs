@@ -109,8 +109,8 @@ fn five_particle_curves_have_the_papers_features() {
     let peak = |k: usize, q: usize| c[k][q].iter().fold(0.0f64, |a, x| a.max(x.abs()));
     let d0: Vec<f64> = (0..5).map(|k| -c[k][0][0]).collect();
     assert_eq!(argmax(&d0), 2, "edgewise drag: {d0:?}");
-    for k in 0..3 {
-        let aniso = 0.5 * (c[k][0][n / 4] - c[k][0][0]);
+    for (k, ck) in c.iter().enumerate().take(3) {
+        let aniso = 0.5 * (ck[0][n / 4] - ck[0][0]);
         assert!((peak(k, 1) - aniso).abs() < 0.02 * aniso, "particle {}: |L|max {} vs {aniso}", k + 1, peak(k, 1));
     }
     let shapes: Vec<Shape> = TABLE2.iter().map(|p| Shape::from_um(p[0], p[1], p[2], p[3], p[4])).collect();

@@ -19,6 +19,27 @@ pub enum PlateletCmd {
     /// Train the networks N (6→50→20→20→3), N_r and N_s (5→20→20→20→1) on a data file; writes
     /// the weights (safetensors) and the training report (paper's Table 1 layout).
     Train(TrainArgs),
+    /// Paper 2 §5.1: the five test particles of Table 2 — coefficient curves against the angle
+    /// of incidence (figs 9–12, networks and the resolved solver) and their motion in the paper's
+    /// channel (fig 14); writes CSV, PNG figures and a summary.
+    Five(FiveArgs),
+}
+
+/// Arguments of `sonoflow platelet five`.
+#[derive(clap::Args, Debug)]
+pub struct FiveArgs {
+    /// Output folder.
+    #[arg(long, default_value = "runs/platelets-five")]
+    pub out: PathBuf,
+    /// Network weights folder.
+    #[arg(long, default_value = "nodes/platelet/weights")]
+    pub weights: PathBuf,
+    /// Simulated time (s).
+    #[arg(long, default_value_t = 60.0)]
+    pub t_end: f64,
+    /// Without the rotation–translation coupling (eq 6 exactly: no y-motion at all).
+    #[arg(long)]
+    pub no_coupling: bool,
 }
 
 /// Arguments of `sonoflow platelet data`.
@@ -74,6 +95,7 @@ pub fn run(cmd: &PlateletCmd) -> anyhow::Result<i32> {
     match cmd {
         PlateletCmd::Data(a) => data(a),
         PlateletCmd::Train(a) => train(a),
+        PlateletCmd::Five(a) => five(a),
     }
 }
 
@@ -232,4 +254,140 @@ fn write_report(
     let json = serde_json::to_string_pretty(reports)?;
     std::fs::write(out.join("training-report.json"), json).with_context(|| format!("writing {}", out.display()))?;
     Ok(())
+}
+
+fn five(a: &FiveArgs) -> anyhow::Result<i32> {
+    use crate::figures::{line_panels, LinePanel};
+    use sonoflow_platelet::dynamics::DynamicsParams;
+    use sonoflow_platelet::experiments::{self, RunOptions, Y0};
+    use std::fmt::Write as _;
+    let model = NetworkModel::load_dir(&a.weights)
+        .with_context(|| format!("loading the networks from {}", a.weights.display()))?;
+    let t0 = Instant::now();
+    let net = experiments::curves(&model, 361);
+    let coupling = !a.no_coupling;
+    let tr = experiments::run(
+        &model,
+        &RunOptions { t_end: a.t_end, record_every: 40, dynamics: DynamicsParams { coupling, ..Default::default() } },
+    )?;
+    let t_net = t0.elapsed().as_secs_f64();
+    // the resolved solver on the same particles (all angles from one solve per particle)
+    let t1 = Instant::now();
+    let solved: Vec<_> = experiments::table2_shapes()
+        .iter()
+        .map(|s| sonoflow_platelet::solve_shape(s, &StokesOptions::default()))
+        .collect::<Result<_, _>>()?;
+    let t_solve = t1.elapsed().as_secs_f64();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut csv = String::from(
+        "particle,psi,drag_network,drag_stokes,lift_network,lift_stokes,pitching_network,pitching_stokes\n",
+    );
+    let mut worst = [0.0f64; 5];
+    for (k, (r, w)) in solved.iter().zip(worst.iter_mut()).enumerate() {
+        for (j, &psi) in net.psi.iter().enumerate() {
+            let (d, l, t) = (r.paper_drag(psi), r.paper_lift(psi), r.paper_torque(psi));
+            *w = w.max((net.drag[k][j] - d).abs() / d).max((net.lift[k][j] - l).abs() / d);
+            let _ = writeln!(
+                csv,
+                "{},{psi:.6},{:.6},{d:.6},{:.6},{l:.6},{:.6},{t:.6}",
+                k + 1,
+                net.drag[k][j],
+                net.lift[k][j],
+                net.pitching[k][j]
+            );
+        }
+    }
+    std::fs::write(a.out.join("coefficients.csv"), csv)?;
+    let mut csv = String::from("t");
+    for k in 1..=5 {
+        let _ = write!(csv, ",y{k}_m,vy{k}_m_s,phi{k}_rad");
+    }
+    csv.push('\n');
+    for (i, t) in tr.t.iter().enumerate() {
+        let _ = write!(csv, "{t:.6}");
+        for k in 0..5 {
+            let _ = write!(csv, ",{:.12e},{:.6e},{:.6}", tr.y[k][i], tr.vy[k][i], tr.phi[k][i]);
+        }
+        csv.push('\n');
+    }
+    std::fs::write(a.out.join("trajectories.csv"), csv)?;
+    let deg: Vec<f64> = net.psi.iter().map(|p| p.to_degrees()).collect();
+    let per = |q: &Vec<Vec<f64>>| -> Vec<(String, Vec<(f64, f64)>)> {
+        (0..5)
+            .map(|k| (format!("particle {}", k + 1), deg.iter().copied().zip(q[k].iter().copied()).collect()))
+            .collect()
+    };
+    let rot: Vec<Vec<f64>> = net.rotational.iter().map(|r| vec![*r; deg.len()]).collect();
+    let f1 = line_panels(
+        &a.out,
+        "coefficients.png",
+        "Five test particles (Table 2): coefficients from the networks against the angle of incidence",
+        "Paper units of Algorithm 1 (um, um/s, ug): D, L at |dv| = 1 um/s, T about the centre of mass, T_r at 2 pi rad/s; paper 2 figs 9-12.",
+        2,
+        &[
+            LinePanel { title: "drag D (fig 9)", x_desc: "angle of incidence psi (deg)", y_desc: "D (um ug/s^2)", series: per(&net.drag) },
+            LinePanel { title: "lift L (fig 10)", x_desc: "angle of incidence psi (deg)", y_desc: "L (um ug/s^2)", series: per(&net.lift) },
+            LinePanel { title: "rotational torque T_r (fig 11)", x_desc: "angle of incidence psi (deg)", y_desc: "T_r (um^2 ug/s^2)", series: per(&rot) },
+            LinePanel { title: "pitching torque T (fig 12)", x_desc: "angle of incidence psi (deg)", y_desc: "T (um^2 ug/s^2)", series: per(&net.pitching) },
+        ],
+    )?;
+    let ys: Vec<(String, Vec<(f64, f64)>)> = (0..5)
+        .map(|k| {
+            (format!("particle {}", k + 1), tr.t.iter().copied().zip(tr.y[k].iter().map(|y| (y - Y0) * 1e9)).collect())
+        })
+        .collect();
+    let phis: Vec<(String, Vec<(f64, f64)>)> = (0..5)
+        .map(|k| {
+            (
+                format!("particle {}", k + 1),
+                tr.t.iter().copied().zip(tr.phi[k].iter().map(|p| p.to_degrees())).collect(),
+            )
+        })
+        .collect();
+    let f2 = line_panels(
+        &a.out,
+        "y_position.png",
+        &format!(
+            "Five test particles in the 2 mm channel from y = 0.5176 mm (coupling {})",
+            if coupling { "on" } else { "off" }
+        ),
+        "Centre-of-mass height minus its start (nm, paper 2 fig 14) and orientation (Jeffery orbits) over time.",
+        2,
+        &[
+            LinePanel { title: "y - y0 (fig 14)", x_desc: "t (s)", y_desc: "y - y0 (nm)", series: ys },
+            LinePanel { title: "orientation phi", x_desc: "t (s)", y_desc: "phi (deg)", series: phis },
+        ],
+    )?;
+    let mut md = format!(
+        "# Five test particles (paper 2, §5.1)\n\nNetworks `{}`; channel 2 mm, v_in = 5 mm/s, start y = 0.5176 mm (shear rate {:.4} 1/s), {} s of motion, sub-step 0.25 ms, coefficients every 10th, rotation–translation coupling {}. Networks + dynamics: {t_net:.2} s; the resolved solver on the five shapes: {t_solve:.1} s.\n\n| particle | Lx × Ly × Lz (µm), α_top, α_bot | B = c_s/c_r | Jeffery period 4π/(γ̇√(1−B²)) | measured period | y range (nm) | y(end) − y0 (nm) | networks vs solver (drag, lift; % of D) |\n|---:|---|---:|---:|---:|---:|---:|---:|\n",
+        a.weights.display(),
+        tr.shear_rate,
+        a.t_end,
+        if coupling { "on" } else { "off" }
+    );
+    for (k, (p, w)) in experiments::TABLE2.iter().zip(worst).enumerate() {
+        let jp = experiments::jeffery_period(tr.shear_rate, net.jeffery_b[k]);
+        let mp = experiments::rotation_period(&tr.t, &tr.phi[k]).map_or("–".to_string(), |v| format!("{v:.3} s"));
+        let (lo, hi) = tr.y[k].iter().fold((f64::MAX, f64::MIN), |(a, b), &y| (a.min(y), b.max(y)));
+        let end = tr.y[k].last().copied().unwrap_or(Y0) - Y0;
+        let _ = writeln!(
+            md,
+            "| {} | {} × {} × {}, {}, {} | {:.5} | {jp:.3} s | {mp} | {:.2} | {:+.2} | {:.2} |",
+            k + 1,
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+            p[4],
+            net.jeffery_b[k],
+            (hi - lo) * 1e9,
+            end * 1e9,
+            100.0 * w
+        );
+    }
+    md.push_str("\nFigures: `figures/coefficients.png` (figs 9–12), `figures/y_position.png` (fig 14). Data: `coefficients.csv`, `trajectories.csv`.\n");
+    std::fs::write(a.out.join("five-particles.md"), &md)?;
+    println!("{md}");
+    println!("figures: {}, {}", a.out.join(&f1.path).display(), a.out.join(&f2.path).display());
+    Ok(0)
 }

@@ -187,3 +187,70 @@ fn sweep_runs_each_point_and_reports_error_against_time() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("density_per_mm2=-1"));
     assert!(!dir.path().join("bad").exists());
 }
+
+/// `sonoflow platelet data` then `train` on a small data set: the weights load back as the
+/// networks and reproduce the report's test error; `five` writes its figures and tables.
+#[test]
+fn platelet_tools_generate_train_and_run_the_five_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("d.jsonl");
+    let weights = dir.path().join("w");
+    let run = |args: &[&str]| {
+        let out = Command::new(bin()).arg("platelet").args(args).output().unwrap();
+        let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        (out.status.code().unwrap_or(-1), text)
+    };
+    let d = data.to_str().unwrap();
+    let (code, text) =
+        run(&["data", "--out", d, "--shapes", "24", "--generalisation", "4", "--n-beta", "6", "--threads", "2"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("24 in-bounds + 4 generalisation"), "{text}");
+    // resumed: nothing left to solve, same file
+    let before = std::fs::read_to_string(&data).unwrap();
+    let (code, text) =
+        run(&["data", "--out", d, "--shapes", "24", "--generalisation", "4", "--n-beta", "6", "--threads", "2"]);
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(std::fs::read_to_string(&data).unwrap(), before);
+    // other solver options on the same file: refused
+    let (code, text) = run(&["data", "--out", d, "--shapes", "24", "--n-beta", "8"]);
+    assert_ne!(code, 0);
+    assert!(text.contains("generated with"), "{text}");
+    let (code, text) = run(&["train", "--data", d, "--out", weights.to_str().unwrap(), "--epochs", "30"]);
+    assert_eq!(code, 0, "{text}");
+    for f in ["n.safetensors", "n_r.safetensors", "n_s.safetensors", "training-report.md", "training-report.json"] {
+        assert!(weights.join(f).exists(), "{f} missing: {text}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(weights.join("training-report.json")).unwrap()).unwrap();
+    let sets = report[0]["sets"].as_array().unwrap();
+    let names: Vec<&str> = sets.iter().map(|s| s["set"].as_str().unwrap()).collect();
+    assert_eq!(names, ["training", "test", "generalisation"]);
+    // shapes split 80/20: 19 training and 5 test shapes × 4 angles
+    assert_eq!((sets[0]["n"].as_u64(), sets[1]["n"].as_u64(), sets[2]["n"].as_u64()), (Some(76), Some(20), Some(16)));
+    let model = sonoflow_platelet::nn::model::NetworkModel::load_dir(&weights).unwrap();
+    assert_eq!(model.networks().0.sizes(), [6, 50, 20, 20, 3]);
+    let (code, text) = run(&[
+        "five",
+        "--weights",
+        weights.to_str().unwrap(),
+        "--out",
+        dir.path().join("five").to_str().unwrap(),
+        "--t-end",
+        "2",
+    ]);
+    assert_eq!(code, 0, "{text}");
+    for f in [
+        "coefficients.csv",
+        "trajectories.csv",
+        "five-particles.md",
+        "figures/coefficients.png",
+        "figures/y_position.png",
+    ] {
+        assert!(dir.path().join("five").join(f).exists(), "{f} missing: {text}");
+    }
+    let csv = std::fs::read_to_string(dir.path().join("five/coefficients.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 5 * 361);
+    let (code, text) = run(&["train", "--data", dir.path().join("none.jsonl").to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(text.contains("none.jsonl"), "{text}");
+}

@@ -18,10 +18,12 @@ use std::path::Path;
 
 mod doppler;
 mod histograms;
+mod lines;
 mod stages;
 mod vectors;
 pub use doppler::*;
 pub use histograms::*;
+pub use lines::*;
 pub use stages::*;
 pub use vectors::*;
 
