@@ -89,6 +89,15 @@ pub struct TrainArgs {
     /// Seed of the angles, the split and the training.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Initial Adam step (cosine decay to 1e-5).
+    #[arg(long, default_value_t = TrainConfig::default().learning_rate)]
+    pub learning_rate: f64,
+    /// Mini-batch size.
+    #[arg(long, default_value_t = TrainConfig::default().batch_size)]
+    pub batch_size: usize,
+    /// Stop after this many epochs without a better validation loss (0: never).
+    #[arg(long, default_value_t = TrainConfig::default().patience)]
+    pub patience: usize,
 }
 
 pub fn run(cmd: &PlateletCmd) -> anyhow::Result<i32> {
@@ -171,7 +180,14 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
     let dtr = dataset::network_datasets(&training, a.angles, a.seed)?;
     let dte = dataset::network_datasets(&test, a.angles, a.seed)?;
     let dg = if gen.is_empty() { None } else { Some(dataset::network_datasets(&gen, a.angles, a.seed)?) };
-    let cfg = TrainConfig { epochs: a.epochs, seed: a.seed, ..TrainConfig::default() };
+    let cfg = TrainConfig {
+        epochs: a.epochs,
+        seed: a.seed,
+        learning_rate: a.learning_rate,
+        batch_size: a.batch_size,
+        patience: a.patience,
+        ..TrainConfig::default()
+    };
     cfg.validate()?;
     let t0 = Instant::now();
     let mut reports: Vec<TrainingReport> = Vec::new();
