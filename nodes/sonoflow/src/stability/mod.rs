@@ -1,5 +1,6 @@
 //! `sonoflow stability`: the stability matrix. Runs the named stiff and extreme cases of every
-//! stage (SPH, SIMUS, beamforming, Doppler, smoothn, analytic flow, MCAP recording, launch files)
+//! stage (SPH, SIMUS, beamforming, Doppler, smoothn, analytic flow, MCAP recording, launch files,
+//! platelets)
 //! through the library crates — no processes, no IPC — and prints one table of
 //! case → outcome, so "numerical stability on stiff and extreme cases" is one visible artefact.
 //!
@@ -20,6 +21,7 @@
 
 mod cases_beamform;
 mod cases_io;
+mod cases_platelet;
 mod cases_simus;
 mod cases_smoothn;
 mod cases_sph;
@@ -50,11 +52,13 @@ pub enum Stage {
     Mcap,
     /// Launch-file checks (`sonoflow::launch`).
     Launch,
+    /// Platelet suspension: Stokes solver, networks, dynamics (`sonoflow-platelet`).
+    Platelet,
 }
 
 impl Stage {
     /// Every stage, in pipeline order.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Sph,
         Stage::Simus,
         Stage::Beamform,
@@ -63,6 +67,7 @@ impl Stage {
         Stage::AnalyticFlow,
         Stage::Mcap,
         Stage::Launch,
+        Stage::Platelet,
     ];
 
     /// The name printed in the table.
@@ -76,6 +81,7 @@ impl Stage {
             Stage::AnalyticFlow => "analytic-flow",
             Stage::Mcap => "mcap",
             Stage::Launch => "launch",
+            Stage::Platelet => "platelet",
         }
     }
 }
@@ -218,6 +224,7 @@ pub fn cases() -> Vec<Case> {
     v.extend(cases_beamform::cases());
     v.extend(cases_smoothn::cases());
     v.extend(cases_io::cases());
+    v.extend(cases_platelet::cases());
     v.sort_by_key(|c| c.stage);
     v
 }
