@@ -95,6 +95,9 @@ pub struct TrainArgs {
     /// Mini-batch size.
     #[arg(long, default_value_t = TrainConfig::default().batch_size)]
     pub batch_size: usize,
+    /// Trainings per network from different initial weights; the lowest validation loss is kept.
+    #[arg(long, default_value_t = 1)]
+    pub restarts: usize,
     /// Stop after this many epochs without a better validation loss (0: never).
     #[arg(long, default_value_t = TrainConfig::default().patience)]
     pub patience: usize,
@@ -200,7 +203,19 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
     ];
     for (name, sizes, outputs, pick) in nets_spec {
         let t = Instant::now();
-        let (net, outcome) = sonoflow_platelet::nn::train::train(&sizes, pick(&dtr), &cfg)?;
+        // `restarts` trainings from different initial weights and shuffles (the shape split stays
+        // the same); the one with the lowest validation loss (part of the training shapes, never
+        // the test shapes) is kept
+        let mut best: Option<(sonoflow_platelet::nn::mlp::Mlp, sonoflow_platelet::nn::train::TrainOutcome)> = None;
+        for r in 0..a.restarts {
+            let c = TrainConfig { seed: cfg.seed.wrapping_add(1000 * r as u64), ..cfg.clone() };
+            let (net, outcome) = sonoflow_platelet::nn::train::train(&sizes, pick(&dtr), &c)?;
+            eprintln!("platelet train: {name} restart {r}: validation MSE {:.3e}", outcome.best_validation_loss);
+            if best.as_ref().is_none_or(|(_, o)| outcome.best_validation_loss < o.best_validation_loss) {
+                best = Some((net, outcome));
+            }
+        }
+        let Some((net, outcome)) = best else { anyhow::bail!("--restarts must be at least 1") };
         let mut sets = vec![
             SetErrors { set: "training".into(), n: pick(&dtr).len(), per_output: evaluate(&net, pick(&dtr))? },
             SetErrors { set: "test".into(), n: pick(&dte).len(), per_output: evaluate(&net, pick(&dte))? },
@@ -250,7 +265,7 @@ fn write_report(
 ) -> anyhow::Result<()> {
     let (inb, gen) = split(records);
     let mut md = format!(
-        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}. Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nReproduce: `sonoflow platelet train --data {} --out {}`.\n\n",
+        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}; {} epoch(s) at most, {} restart(s) per network (kept: the lowest validation loss). Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nReproduce: `sonoflow platelet train --data {} --out {} --epochs {} --patience {} --restarts {} --seed {}`.\n\n",
         data.display(),
         inb.len(),
         a.angles,
@@ -258,9 +273,15 @@ fn write_report(
         100.0 * (1.0 - a.test_fraction),
         100.0 * a.test_fraction,
         a.seed,
+        a.epochs,
+        a.restarts,
         secs,
         data.display(),
-        out.display()
+        out.display(),
+        a.epochs,
+        a.patience,
+        a.restarts,
+        a.seed
     );
     for r in reports {
         md.push_str(&r.to_markdown());
