@@ -117,3 +117,40 @@ fn bad_platelet_parameters_are_caught_by_check() {
     assert_ne!(out.status.code(), Some(0));
     assert!(err.contains("nodes.platelets.params") && err.contains("bump_length"), "{err}");
 }
+
+#[test]
+fn five_explicit_platelets_follow_the_ramped_channel_flow() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let out = run_graph("tests/launch/five-platelets.toml", &run, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let r = McapReader::open(&run.join("recording.mcap")).unwrap();
+    let msgs: Vec<Vec<u8>> = r
+        .messages(&ReadOptions { topics: Some(vec!["platelets".into()]), start_time: None, end_time: None })
+        .unwrap()
+        .map(|m| m.unwrap().data)
+        .collect();
+    assert_eq!(msgs.len(), 11);
+    let (x0, z0) = (-6e-3, 19e-3);
+    let (h, v_in, y0) = (2e-3, 5e-3, 0.5176e-3);
+    let s = y0 / h;
+    let u0 = 2.0 * v_in * s * (1.0 - s); // the profile at y0, times the ramp t / 1 s
+    for (k, m) in msgs.iter().enumerate() {
+        let (hd, ps) = cdr::decode::<ParticleSnapshot>(m).unwrap();
+        let t = hd.common.t_valid;
+        assert!((t - k as f64 * 0.05).abs() < 1e-12, "t = {t}");
+        assert_eq!(ps.len(), 5);
+        for p in &ps {
+            let (x, y) = (p.x as f64 - x0, p.z as f64 - z0);
+            // carried along the streamline: x(t) = x(0) + u0 t² / 2 (ramp), y stays (f32: ±4 nm)
+            let xs = 1e-3 + 1e-5 * p.id as f64;
+            let dx = u0 * t * t / 2.0;
+            assert!((x - xs - dx).abs() < 1e-3 * dx + 1e-8, "id {} t {t}: x {x} expected {}", p.id, xs + dx);
+            assert!((y - y0).abs() < 1e-8, "id {} t {t}: y {y}", p.id);
+            // relaxed onto the flow frozen at the last sub-step's mid time t − τ/2 (m/C_d ~ 10 ns)
+            let v = if t == 0.0 { 0.0 } else { u0 * (t - 1.25e-4) };
+            assert!((p.vx as f64 - v).abs() < 1e-5 * v + 1e-12, "id {}: vx {} vs {v}", p.id, p.vx);
+            assert!((p.vz as f64).abs() < 1e-9, "id {}: vz {}", p.id, p.vz);
+        }
+    }
+}
