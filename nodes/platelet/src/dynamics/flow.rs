@@ -235,6 +235,8 @@ impl LatticeField {
     }
 
     /// Samples a flow onto a lattice (e.g. an analytic flow, as a finite element field would be).
+    /// The lattice reports the flow's [`CarrierFlow::walls`] (straight bounds); walls that vary
+    /// along x ([`CarrierFlow::local_walls`], the stenosis) are not carried over.
     pub fn from_flow(
         flow: &dyn CarrierFlow,
         t: f64,
