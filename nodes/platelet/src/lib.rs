@@ -4,7 +4,8 @@
 //! ([`shape`]), the coefficient interface of eq 6 ([`coefficients`]), closed forms of spheroids
 //! ([`spheroid`]), a boundary-element Stokes solver for the resolved runs of section 4.3
 //! ([`stokes`]), the training data ([`dataset`]), the 2-D particle dynamics
-//! ([`dynamics`]) and the networks of sections 4.2–4.4 ([`nn`]).
+//! ([`dynamics`], with the stenosed channel of section 5.2), the networks of sections 4.2–4.4 ([`nn`])
+//! and a ready-to-run suspension built from serde parameters ([`suspension`]).
 
 pub mod coefficients;
 pub mod dataset;
@@ -14,6 +15,7 @@ pub mod nn;
 pub mod shape;
 pub mod spheroid;
 pub mod stokes;
+pub mod suspension;
 
 pub use coefficients::{CoefficientModel, Rotational, Translational};
 pub use shape::{Shape, ShapeError, ShapeSampler};

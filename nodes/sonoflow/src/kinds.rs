@@ -86,6 +86,15 @@ static KINDS: &[KindSpec] = &[
         run: crate::node_sph::run,
     },
     KindSpec {
+        name: "platelets",
+        about: "platelet suspension (paper 2, Algorithm 2: point particles with shape, trained coefficient networks) in an analytic carrier (straight or stenosed channel, shear): platelet snapshots every few macro steps, with the time split advection / collisions / coefficients",
+        ports: &[port("particles", Out, ParticleSnapshotV1, true)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate: crate::node_platelet::validate,
+        run: crate::node_platelet::run,
+    },
+    KindSpec {
         name: "simus",
         about: "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
         ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV1, true)],

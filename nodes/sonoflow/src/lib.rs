@@ -11,6 +11,7 @@ pub mod launch;
 pub mod node_beamform;
 pub mod node_evaluate;
 pub mod node_flow;
+pub mod node_platelet;
 pub mod node_recorder;
 pub mod node_regularise;
 pub mod node_replay;

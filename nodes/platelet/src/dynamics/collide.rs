@@ -20,6 +20,11 @@
 //! - **Walls** y = lo, y = hi ([`super::flow::CarrierFlow::walls`]): a centre that left the channel
 //!   is reflected back (y → 2 lo − y), and the normal velocity is reversed; if it is still
 //!   outside (a jump longer than the channel) it is clamped onto the wall.
+//! - **Sloped walls** y_lo(x), y_hi(x) ([`super::flow::CarrierFlow::local_walls`], the stenosis):
+//!   [`walls_local`] mirrors a centre that crossed a wall about the wall's tangent line at its
+//!   abscissa, p → p − 2 ((p − w)·n) n, reflects the velocity V → V − 2 (V·n) n with n the unit
+//!   normal (−s, 1)/√(1 + s²) of slope s, and clamps y into the walls at the new abscissa. For
+//!   slope 0 this is exactly [`walls`].
 
 /// Buffers for the cell lattice (reused between steps).
 #[derive(Clone, Debug, Default)]
@@ -238,6 +243,45 @@ pub fn walls(y: &mut [f64], vy: &mut [f64], lo: f64, hi: f64) -> usize {
             *vy = -*vy;
             n += 1;
         }
+    }
+    n
+}
+
+/// Keeps centres between walls that vary along x (module doc); `walls_at(x)` gives the walls at
+/// abscissa x (`None`: no walls there). Returns how many were put back.
+pub fn walls_local<F>(x: &mut [f64], y: &mut [f64], vx: &mut [f64], vy: &mut [f64], walls_at: F) -> usize
+where
+    F: Fn(f64) -> Option<super::flow::LocalWalls>,
+{
+    let mut n = 0;
+    for i in 0..y.len() {
+        let Some(w) = walls_at(x[i]) else { continue };
+        let (wy, s) = if y[i] < w.lo {
+            (w.lo, w.slope_lo)
+        } else if y[i] > w.hi {
+            (w.hi, w.slope_hi)
+        } else {
+            continue;
+        };
+        n += 1;
+        if s == 0.0 {
+            // the straight wall, bit for bit as `walls`
+            y[i] = if wy == w.lo { (2.0 * w.lo - y[i]).min(w.hi) } else { (2.0 * w.hi - y[i]).max(w.lo) };
+            vy[i] = -vy[i];
+            continue;
+        }
+        let inv = 1.0 / (1.0 + s * s);
+        // mirror about the tangent line through (x, wy): (p − w)·n n = (y − wy)/(1 + s²) (−s, 1)
+        let d = (y[i] - wy) * inv;
+        let xn = x[i] + 2.0 * s * d;
+        let yn = y[i] - 2.0 * d;
+        // V − 2 (V·n) n, (V·n) n = (−s vx + vy)/(1 + s²) (−s, 1)
+        let vn = (-s * vx[i] + vy[i]) * inv;
+        vx[i] += 2.0 * s * vn;
+        vy[i] -= 2.0 * vn;
+        let w2 = walls_at(xn).unwrap_or(w);
+        x[i] = xn;
+        y[i] = yn.clamp(w2.lo, w2.hi.max(w2.lo));
     }
     n
 }

@@ -15,6 +15,8 @@
 //!   (gradient of the bilinear interpolant at the cell centre). Both are exact for linear fields
 //!   (eq 12 equals ½ curl of the bilinear interpolant at the cell centre). Points outside the
 //!   lattice are clamped onto it.
+//! - [`super::Stenosis`] (module `stenosis`): section 5.2's channel with a 25 % narrowing, from the
+//!   lubrication approximation; its walls vary along x ([`CarrierFlow::local_walls`]).
 
 /// The carrier flow at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -58,10 +60,31 @@ pub trait CarrierFlow: Send + Sync {
     fn strain_rate(&self, x: [f64; 2], t: f64) -> [f64; 3] {
         self.sample(x, t).strain
     }
-    /// Walls y = lo and y = hi the particle centres must stay between, if any.
+    /// Walls y = lo and y = hi the particle centres must stay between, if any (for a channel of
+    /// varying gap: the outer bounds; the dynamics uses [`CarrierFlow::local_walls`]).
     fn walls(&self) -> Option<[f64; 2]> {
         None
     }
+    /// The walls at abscissa x: y_lo(x) ≤ y ≤ y_hi(x) with their slopes dy/dx. Default: the
+    /// straight walls of [`CarrierFlow::walls`] (slopes 0). A flow whose walls vary along x (the
+    /// [`super::Stenosis`]) overrides this; the dynamics reflects centres that crossed a wall about
+    /// the local wall (`collide::walls_local`), which is the plain reflection for slope 0.
+    fn local_walls(&self, _x: f64) -> Option<LocalWalls> {
+        self.walls().map(|[lo, hi]| LocalWalls { lo, hi, slope_lo: 0.0, slope_hi: 0.0 })
+    }
+}
+
+/// The walls of a channel at one abscissa (see [`CarrierFlow::local_walls`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LocalWalls {
+    /// Lower wall y_lo(x) \[m\].
+    pub lo: f64,
+    /// Upper wall y_hi(x) \[m\].
+    pub hi: f64,
+    /// dy_lo/dx.
+    pub slope_lo: f64,
+    /// dy_hi/dx.
+    pub slope_hi: f64,
 }
 
 /// Errors of flow parameters.
@@ -78,7 +101,7 @@ pub enum FlowError {
     Size { nx: usize, ny: usize, expected: usize, got: usize },
 }
 
-fn check(field: &'static str, value: f64, ok: bool, allowed: &'static str) -> Result<(), FlowError> {
+pub(crate) fn check(field: &'static str, value: f64, ok: bool, allowed: &'static str) -> Result<(), FlowError> {
     if ok && value.is_finite() {
         Ok(())
     } else {
@@ -212,6 +235,8 @@ impl LatticeField {
     }
 
     /// Samples a flow onto a lattice (e.g. an analytic flow, as a finite element field would be).
+    /// The lattice reports the flow's [`CarrierFlow::walls`] (straight bounds); walls that vary
+    /// along x ([`CarrierFlow::local_walls`], the stenosis) are not carried over.
     pub fn from_flow(
         flow: &dyn CarrierFlow,
         t: f64,

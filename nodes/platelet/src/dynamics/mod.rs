@@ -45,11 +45,13 @@ pub mod flow;
 pub mod integrate;
 pub mod particles;
 pub mod standin;
+pub mod stenosis;
 
 pub use collide::CellGrid;
-pub use flow::{CarrierFlow, Channel, FlowError, FlowSample, LatticeField, SimpleShear};
+pub use flow::{CarrierFlow, Channel, FlowError, FlowSample, LatticeField, LocalWalls, SimpleShear};
 pub use particles::{ParticleState, Particles, DEFAULT_DENSITY};
 pub use standin::DiscStandIn;
+pub use stenosis::Stenosis;
 
 use crate::coefficients::CoefficientModel;
 use crate::shape::ShapeError;
@@ -390,8 +392,8 @@ impl Dynamics {
             };
             tm.impulses = collide::resolve(&mut s, &self.grid.pairs, self.params.restitution);
         }
-        if let Some([lo, hi]) = flow.walls() {
-            tm.wall_hits = collide::walls(&mut p.y, &mut p.vy, lo, hi);
+        if flow.walls().is_some() {
+            tm.wall_hits = collide::walls_local(&mut p.x, &mut p.y, &mut p.vx, &mut p.vy, |x| flow.local_walls(x));
         }
         tm.collisions = t2.elapsed();
         self.sub_step_count += 1;
