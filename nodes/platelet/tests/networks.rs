@@ -1,4 +1,3 @@
-#![allow(clippy::needless_range_loop)]
 //! The shipped networks (`nodes/platelet/weights`, trained by `sonoflow platelet train` on
 //! `nodes/platelet/data/stokes-data.jsonl`) on the five test particles of paper 2's Table 2:
 //! against our resolved Stokes solver (an independent computation) and the paper's qualitative
