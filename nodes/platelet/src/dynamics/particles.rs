@@ -109,9 +109,10 @@ impl Particles {
         self.density
     }
 
-    /// Reserve room for `n` more particles.
-    pub fn reserve(&mut self, n: usize) {
-        for v in [
+    /// Every per-particle `f64` array (one place to list them, so none is forgotten when the
+    /// arrays are resized or reordered).
+    fn f64_arrays_mut(&mut self) -> [&mut Vec<f64>; 12] {
+        [
             &mut self.mass,
             &mut self.inertia,
             &mut self.radius,
@@ -124,7 +125,12 @@ impl Particles {
             &mut self.psi,
             &mut self.dv_dir,
             &mut self.coupling,
-        ] {
+        ]
+    }
+
+    /// Reserve room for `n` more particles.
+    pub fn reserve(&mut self, n: usize) {
+        for v in self.f64_arrays_mut() {
             v.reserve(n);
         }
         self.shape.reserve(n);
@@ -226,20 +232,7 @@ impl Particles {
         }
         apply(&mut self.id, order);
         apply(&mut self.shape, order);
-        for v in [
-            &mut self.mass,
-            &mut self.inertia,
-            &mut self.radius,
-            &mut self.x,
-            &mut self.y,
-            &mut self.phi,
-            &mut self.vx,
-            &mut self.vy,
-            &mut self.omega,
-            &mut self.psi,
-            &mut self.dv_dir,
-            &mut self.coupling,
-        ] {
+        for v in self.f64_arrays_mut() {
             apply(v, order);
         }
         apply(&mut self.trans, order);
