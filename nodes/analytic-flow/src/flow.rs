@@ -47,6 +47,24 @@ pub enum FlowKind {
         /// Segment length along the axis (m).
         length: f64,
     },
+    /// A band of fluid translating rigidly (plug flow): every particle moves with the same velocity
+    /// `v a`, `a = (cos θ, sin θ)` as for [`FlowKind::Poiseuille`], inside `|s| <= length/2`,
+    /// `r <= width/2` (periodic along the axis). No velocity gradient anywhere: the phantom that
+    /// isolates the imaging chain's Doppler gain from the flow (speckle translation).
+    Plug {
+        /// Axis point, lateral (m).
+        center_x: f64,
+        /// Axis point, depth (m).
+        center_z: f64,
+        /// Axis angle from +x towards +z (degrees).
+        angle_deg: f64,
+        /// Band width across the axis (m).
+        width: f64,
+        /// Signed speed along the axis (m/s).
+        v: f64,
+        /// Band length along the axis (m).
+        length: f64,
+    },
     /// Rigid rotation of a disk of fluid.
     ///
     /// `v = omega * (-(z - center_z), x - center_x)` for points with
@@ -92,6 +110,14 @@ impl FlowKind {
                 require_abs("flow.angle_deg", angle_deg, 360.0, "finite, -360 <= value <= 360 degrees")?;
                 require_pos("flow.diameter", diameter, MAX_EXTENT_M, &extent)?;
                 require_abs("flow.v_max", v_max, MAX_SPEED, &format!("finite, |value| <= {MAX_SPEED} m/s"))?;
+                require_pos("flow.length", length, MAX_EXTENT_M, &extent)?;
+            }
+            FlowKind::Plug { center_x, center_z, angle_deg, width, v, length } => {
+                require_abs("flow.center_x", center_x, MAX_EXTENT_M, &coord)?;
+                require_abs("flow.center_z", center_z, MAX_EXTENT_M, &coord)?;
+                require_abs("flow.angle_deg", angle_deg, 360.0, "finite, -360 <= value <= 360 degrees")?;
+                require_pos("flow.width", width, MAX_EXTENT_M, &extent)?;
+                require_abs("flow.v", v, MAX_SPEED, &format!("finite, |value| <= {MAX_SPEED} m/s"))?;
                 require_pos("flow.length", length, MAX_EXTENT_M, &extent)?;
             }
             FlowKind::RotatingDisk { center_x, center_z, radius, omega } => {
@@ -141,6 +167,8 @@ pub(crate) enum Geometry {
         half_d: f64,
         length: f64,
         v_max: f64,
+        /// Uniform speed across the band (plug flow) instead of the parabola.
+        plug: bool,
     },
     Disk {
         cx: f64,
@@ -164,7 +192,20 @@ impl Geometry {
         match *kind {
             FlowKind::Poiseuille { center_x, center_z, angle_deg, diameter, v_max, length } => {
                 let (az, ax) = angle_deg.to_radians().sin_cos();
-                Geometry::Pipe { cx: center_x, cz: center_z, ax, az, half_d: 0.5 * diameter, length, v_max }
+                Geometry::Pipe {
+                    cx: center_x,
+                    cz: center_z,
+                    ax,
+                    az,
+                    half_d: 0.5 * diameter,
+                    length,
+                    v_max,
+                    plug: false,
+                }
+            }
+            FlowKind::Plug { center_x, center_z, angle_deg, width, v, length } => {
+                let (az, ax) = angle_deg.to_radians().sin_cos();
+                Geometry::Pipe { cx: center_x, cz: center_z, ax, az, half_d: 0.5 * width, length, v_max: v, plug: true }
             }
             FlowKind::RotatingDisk { center_x, center_z, radius, omega } => {
                 Geometry::Disk { cx: center_x, cz: center_z, radius, omega }
@@ -181,13 +222,13 @@ impl Geometry {
 
     pub(crate) fn velocity(&self, x: f64, z: f64) -> Option<(f64, f64)> {
         match *self {
-            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max } => {
+            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max, plug } => {
                 let (dx, dz) = (x - cx, z - cz);
                 let s = dx * ax + dz * az;
                 let q = -dx * az + dz * ax;
                 // NaN fails both comparisons and lands in `None`.
                 if s.abs() <= 0.5 * length && q.abs() <= half_d {
-                    let u = pipe_speed(v_max, half_d, q);
+                    let u = pipe_speed(v_max, half_d, q, plug);
                     Some((u * ax, u * az))
                 } else {
                     None
@@ -218,9 +259,9 @@ impl Geometry {
     /// coordinates `(a, b)`.
     pub(crate) fn state(&self, a: f64, b: f64, dt: f64) -> State {
         match *self {
-            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max } => {
+            Geometry::Pipe { cx, cz, ax, az, half_d, length, v_max, plug } => {
                 let q = b;
-                let u = pipe_speed(v_max, half_d, q);
+                let u = pipe_speed(v_max, half_d, q, plug);
                 let half_l = 0.5 * length;
                 // Periodic along the axis: s in [-L/2, L/2] (rem_euclid may
                 // round up to exactly L, which is still on the closed segment).
@@ -237,8 +278,12 @@ impl Geometry {
     }
 }
 
-/// u(q) = v_max (1 - (q / (D/2))^2), clamped to 0 at and beyond the wall.
-fn pipe_speed(v_max: f64, half_d: f64, q: f64) -> f64 {
+/// u(q) = v_max (1 - (q / (D/2))^2), clamped to 0 at and beyond the wall; `v_max` everywhere
+/// for a plug.
+fn pipe_speed(v_max: f64, half_d: f64, q: f64, plug: bool) -> f64 {
+    if plug {
+        return v_max;
+    }
     let xi = q / half_d;
     v_max * (1.0 - xi * xi).max(0.0)
 }

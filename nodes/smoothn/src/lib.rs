@@ -94,6 +94,7 @@
 //! ```
 
 pub mod dct;
+pub mod divfree;
 pub mod gcv;
 mod kernels;
 mod nearest;
@@ -101,5 +102,6 @@ mod params;
 pub mod robust;
 mod smoothn;
 
+pub use crate::divfree::{DivFree, DivFreeError, DivFreeParams, DivFreeReport};
 pub use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};
 pub use crate::smoothn::{smoothn, Smoothn, SmoothnReport, OUTLIER_WEIGHT};

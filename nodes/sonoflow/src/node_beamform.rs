@@ -56,8 +56,14 @@ pub struct BeamformerParams {
     pub fnumber: f64,
     /// Receive steering angles (degrees), one I/Q image each. Paper: −15 and +15.
     pub rx_angles_deg: Vec<f64>,
-    /// RF → I/Q low-pass: bandwidth in % of fc (absent: MUST's default cut-off min(2 fc/fs, 0.5)).
+    /// RF → I/Q low-pass: bandwidth in % of the demodulation frequency (absent: MUST's default
+    /// cut-off min(2 fc/fs, 0.5)).
     pub bandwidth: Option<f64>,
+    /// Demodulation frequency (Hz) of RF → I/Q, also the I/Q images' `fc` (the Doppler nodes
+    /// convert phase to velocity with it). Absent: the RF's centre frequency (MUST). A lower
+    /// frequency with a narrow `bandwidth` keeps the sub-band below the grating-lobe onset
+    /// `c / (pitch (1 + sin|θ_rx|))` of steered receive sub-apertures.
+    pub demod_fc: Option<f64>,
     /// Interpolation of the I/Q traces: `linear` (default) or `nearest`.
     pub interpolation: Interpolation,
 }
@@ -69,6 +75,7 @@ impl Default for BeamformerParams {
             fnumber: 1.5,
             rx_angles_deg: vec![-15.0, 15.0],
             bandwidth: None,
+            demod_fc: None,
             interpolation: Interpolation::Linear,
         }
     }
@@ -97,6 +104,11 @@ impl BeamformerParams {
         if let Some(b) = self.bandwidth {
             if !(b > 0.0 && b < 200.0) {
                 return Err(format!("bandwidth = {b} is out of range: (0, 200) % of fc"));
+            }
+        }
+        if let Some(f) = self.demod_fc {
+            if !(f.is_finite() && f > 0.0 && f <= 1e9) {
+                return Err(format!("demod_fc = {f} is out of range: (0, 1e9] Hz (and below fs/2 of the RF)"));
             }
         }
         Ok(())
@@ -137,6 +149,11 @@ impl Beamformer {
         Ok(Self { params, rf2iq: None, plans: BTreeMap::new(), iq: Vec::new() })
     }
 
+    /// Demodulation frequency for RF frame `h`: `demod_fc` or the RF's centre frequency.
+    pub fn demod_fc(&self, h: &sonoflow_messages::RfFrameHeaderV1) -> f64 {
+        self.params.demod_fc.unwrap_or(h.fc)
+    }
+
     /// Receive angles (rad).
     pub fn rx_angles(&self) -> Vec<f64> {
         self.params.rx_angles_deg.iter().map(|a| a.to_radians()).collect()
@@ -149,9 +166,10 @@ impl Beamformer {
             anyhow::bail!("RF frame {}: sample_format {} is not real f32 RF", h.common.frame_id, h.sample_format);
         }
         let (ns, ne) = (h.n_samples as usize, h.n_channels as usize);
-        let key = (h.fc.to_bits(), h.fs.to_bits(), h.t0.to_bits());
+        let fd = self.demod_fc(h);
+        let key = (fd.to_bits(), h.fs.to_bits(), h.t0.to_bits());
         if self.rf2iq.as_ref().is_none_or(|r| (r.0, r.1, r.2) != key) {
-            let mut p = Rf2IqParams::new(h.fc, h.fs, self.params.bandwidth);
+            let mut p = Rf2IqParams::new(fd, h.fs, self.params.bandwidth);
             p.t0 = h.t0;
             self.rf2iq = Some((key.0, key.1, key.2, Rf2Iq::new(p)?));
         }
@@ -168,7 +186,7 @@ impl Beamformer {
             let mut v = Vec::new();
             for rx in self.rx_angles() {
                 let dp = DasParams {
-                    fc: h.fc,
+                    fc: fd,
                     c: h.c,
                     fs: h.fs,
                     t0: h.t0,
@@ -199,7 +217,7 @@ impl Beamformer {
         let n_rx = self.params.rx_angles_deg.len() as u64;
         let mut ih = IqFrameHeaderV1 {
             grid: GridV1 { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as u32, nz: g.nz as u32 },
-            fc: h.fc,
+            fc: self.demod_fc(h),
             c: h.c,
             prf: h.prf,
             rx_angle: self.params.rx_angles_deg[j].to_radians(),
