@@ -21,6 +21,12 @@ fn main() {
     if let Some(r) = a.get(7) {
         p.noise_ratio = Some(r.parse().unwrap());
     }
+    if let Ok(k) = std::env::var("PROBES") {
+        p.gcv_probes = k.parse().unwrap();
+    }
+    if let Ok(b) = std::env::var("BLOCK") {
+        p.cv_block = b.parse().unwrap();
+    }
     if std::env::var("NOROBUST").is_ok() {
         p.robust = false;
     }

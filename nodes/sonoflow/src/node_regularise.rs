@@ -14,6 +14,14 @@
 //! * Other planes (mask, weight, power, …) are passed through unchanged. The output header carries
 //!   the S used, the outlier fraction (robust weight < 0.5) and whether smoothn converged.
 //!
+//! * `method = "divergence-free"` replaces smoothn by the stream-function fit of
+//!   `sonoflow_smoothn::divfree` (2-D continuity holds exactly; S by block cross-validation,
+//!   noise ratio σx/σz estimated, robust), parameters in the `divergence_free` table. Its data
+//!   weights are those above times a **power mask**: pixels whose `power` plane is more than
+//!   `power_mask_db` (default −15 dB) below its 99th percentile are missing (no blood there; the
+//!   fit extends the flow smoothly over them). The S of the previous frame starts the search of
+//!   the next.
+//!
 //! The smoothing workspace is reused while the grid stays the same (no allocation per frame).
 //! Compute time per message is process CPU time (smoothn uses rayon for the two components).
 
@@ -23,7 +31,19 @@ use serde::{Deserialize, Serialize};
 use sonoflow_messages::kinds::VectorField;
 use sonoflow_messages::{plane, MsgHeaderV1, VectorFieldHeaderV1, MAX_PLANES, VECTOR_REGULARISED};
 use sonoflow_node_kit::{process_cpu_ns, Kit};
-use sonoflow_smoothn::{Flavour, Smoothn, SmoothnParams, WeightFunction};
+use sonoflow_smoothn::{DivFree, DivFreeParams, Flavour, Smoothn, SmoothnParams, WeightFunction};
+
+/// Which regulariser.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Garcia's robust smoothn (paper 1), the default.
+    #[default]
+    Smoothn,
+    /// Stream-function fit: exactly divergence-free (2-D continuity), each component weighted by
+    /// its noise level.
+    DivergenceFree,
+}
 
 /// Where the smoothn weights come from.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
@@ -61,6 +81,15 @@ pub struct RegulariserParams {
     pub weights: WeightSource,
     /// Treat pixels outside the `mask` plane as missing and zero them on output.
     pub mask: bool,
+    /// `smoothn` (default) or `divergence-free`.
+    pub method: Method,
+    /// Parameters of the divergence-free fit (`method = "divergence-free"`): `s` (absent: block
+    /// cross-validation), `order` (2, 3), `noise_ratio` (absent: estimated), `robust`,
+    /// `weight_function`, `selection` (`block-cv`, `gcv`), `cv_block` (pixels), `gcv_probes`.
+    pub divergence_free: DivFreeParams,
+    /// Power mask of the divergence-free fit: pixels with `power` more than this many dB below the
+    /// frame's 99th percentile are missing. In [−100, 0]; default −15.
+    pub power_mask_db: f64,
 }
 
 impl Default for RegulariserParams {
@@ -76,11 +105,24 @@ impl Default for RegulariserParams {
             flavour: d.flavour,
             weights: WeightSource::Auto,
             mask: true,
+            method: Method::Smoothn,
+            divergence_free: DivFreeParams::default(),
+            power_mask_db: -15.0,
         }
     }
 }
 
 impl RegulariserParams {
+    /// Checks every field (smoothn's and the divergence-free fit's).
+    pub fn check(&self) -> Result<(), String> {
+        self.smoothn(None).validate().map_err(|e| e.to_string())?;
+        self.divergence_free.validate().map_err(|e| format!("divergence_free: {e}"))?;
+        if !(self.power_mask_db.is_finite() && (-100.0..=0.0).contains(&self.power_mask_db)) {
+            return Err(format!("power_mask_db = {} is out of range: -100 ..= 0 dB", self.power_mask_db));
+        }
+        Ok(())
+    }
+
     /// The library parameters for a grid with spacing (dz, dx).
     pub fn smoothn(&self, spacing: Option<[f64; 2]>) -> SmoothnParams {
         SmoothnParams {
@@ -97,8 +139,7 @@ impl RegulariserParams {
 }
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
-    let p = parse::<RegulariserParams>(v)?;
-    p.smoothn(None).validate().map_err(|e| e.to_string())
+    parse::<RegulariserParams>(v)?.check()
 }
 
 /// Where a plane id sits in a header's plane list.
@@ -110,6 +151,9 @@ fn find_plane(ids: &[u32], id: u32) -> Option<usize> {
 pub struct Regulariser {
     params: RegulariserParams,
     ws: Option<Smoothn>,
+    /// Divergence-free fitter of the current grid (shape, spacing bits) and the last S.
+    df: Option<([usize; 2], [u64; 2], DivFree)>,
+    last_s: Option<f64>,
     data: Vec<f64>,
     weights: Vec<f64>,
     out: Vec<f64>,
@@ -117,8 +161,8 @@ pub struct Regulariser {
 
 impl Regulariser {
     pub fn new(params: RegulariserParams) -> Result<Self, String> {
-        params.smoothn(None).validate().map_err(|e| e.to_string())?;
-        Ok(Self { params, ws: None, data: Vec::new(), weights: Vec::new(), out: Vec::new() })
+        params.check()?;
+        Ok(Self { params, ws: None, df: None, last_s: None, data: Vec::new(), weights: Vec::new(), out: Vec::new() })
     }
 
     /// Regularises one vector field message (header + planes) into `planes_out` (same layout and
@@ -197,6 +241,9 @@ impl Regulariser {
             return Ok(oh);
         }
         let shape = [nz, nx];
+        if self.params.method == Method::DivergenceFree {
+            return self.divergence_free(h, planes, ids, ivx, ivz, mask, planes_out, oh);
+        }
         if self.ws.as_ref().is_none_or(|w| w.shape() != shape) {
             self.ws = Some(Smoothn::new(&shape, 2)?);
         }
@@ -215,6 +262,73 @@ impl Regulariser {
         oh.smoothing_s = report.s;
         oh.outlier_fraction = report.outlier_fraction;
         oh.converged = report.converged as u32;
+        Ok(oh)
+    }
+}
+
+impl Regulariser {
+    /// The divergence-free fit of one frame (weights already in `self.weights`).
+    #[allow(clippy::too_many_arguments)]
+    fn divergence_free(
+        &mut self,
+        h: &VectorFieldHeaderV1,
+        planes: &[f32],
+        ids: &[u32],
+        ivx: usize,
+        ivz: usize,
+        mask: Option<&[f32]>,
+        planes_out: &mut [f32],
+        mut oh: VectorFieldHeaderV1,
+    ) -> anyhow::Result<VectorFieldHeaderV1> {
+        let (nx, nz) = (h.grid.nx as usize, h.grid.nz as usize);
+        let n = nx * nz;
+        let (dz, dx) = (h.grid.dz, h.grid.dx);
+        if !(dz.is_finite() && dz > 0.0 && dx.is_finite() && dx > 0.0) {
+            anyhow::bail!("vector field frame {}: grid spacing dz = {dz}, dx = {dx} must be > 0", h.common.frame_id);
+        }
+        // Power mask: no blood where the power is far below the frame's 99th percentile.
+        if let Some(ip) = find_plane(ids, plane::POWER) {
+            let pw = &planes[ip * n..(ip + 1) * n];
+            let mut sorted: Vec<f32> = pw.iter().copied().filter(|v| v.is_finite()).collect();
+            sorted.sort_by(f32::total_cmp);
+            let p99 = sorted.get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize).copied().unwrap_or(0.0);
+            let floor = f64::from(p99) * 10f64.powf(self.params.power_mask_db / 10.0);
+            for (w, p) in self.weights.iter_mut().zip(pw) {
+                if !(p.is_finite() && f64::from(*p) >= floor) {
+                    *w = 0.0;
+                }
+            }
+        }
+        let dp = &self.params.divergence_free;
+        let key = ([nz, nx], [dz.to_bits(), dx.to_bits()]);
+        if self.df.as_ref().is_none_or(|(s, sp, f)| (*s, *sp) != key || f.order() != dp.order) {
+            self.df = Some((key.0, key.1, DivFree::new([nz, nx], [dz, dx], dp.order)?));
+        }
+        let Some((_, _, df)) = self.df.as_ref() else { anyhow::bail!("no divergence-free fitter") };
+        let (ux, uz) = self.data.split_at(n);
+        let (mut vx, mut vz) = (vec![0.0; n], vec![0.0; n]);
+        let report = match df.fit_warm(ux, uz, Some(&self.weights), dp, self.last_s, &mut vx, &mut vz) {
+            Ok(r) => r,
+            Err(sonoflow_smoothn::DivFreeError::NoData) => {
+                planes_out[ivx * n..(ivx + 1) * n].fill(0.0);
+                planes_out[ivz * n..(ivz + 1) * n].fill(0.0);
+                oh.smoothing_s = 0.0;
+                oh.outlier_fraction = 0.0;
+                oh.converged = 0;
+                return Ok(oh);
+            }
+            Err(e) => return Err(e.into()),
+        };
+        self.last_s = Some(report.s);
+        for i in 0..n {
+            let outside = mask.is_some_and(|m| m[i] <= 0.5);
+            let (a, b) = if outside { (0.0, 0.0) } else { (vx[i] as f32, vz[i] as f32) };
+            planes_out[ivx * n + i] = a;
+            planes_out[ivz * n + i] = b;
+        }
+        oh.smoothing_s = report.s;
+        oh.outlier_fraction = report.outlier_fraction;
+        oh.converged = 1;
         Ok(oh)
     }
 }
