@@ -30,8 +30,8 @@
 //! max(dz, dx)` (so S is dimensionless, in pixel units like smoothn's S). The penalty's null
 //! space holds the velocity fields that are polynomials of degree < m on each axis: with the
 //! default m = 3, parabolic (Poiseuille) profiles are not penalised. ψ's own null space (a
-//! constant and the corner checkerboard, both invisible in the velocity) is removed by a
-//! vanishing ridge `ε‖ψ‖²`, ε = 1e-10 of the mean diagonal.
+//! constant and the corner checkerboard, the only fields with zero velocity under this stencil,
+//! both invisible in the velocity) is removed by pinning ψ to 0 at the corners (0, 0) and (0, 1).
 //!
 //! The normal equations are a sparse SPD system (about 30 non-zeros per column), solved by a
 //! sparse Cholesky factorisation (faer, AMD ordering); the symbolic factorisation is computed
@@ -51,8 +51,8 @@
 //!   hint) until bracketed, then refines by a parabola; S is chosen in the first pass and kept by
 //!   the robust passes.
 //! * **Robust** (default): as smoothn, 3 passes; after each, bisquare (or Cauchy, Talworth)
-//!   weights of the studentised residual norm `‖((vx − ux)/r, vz − uz)‖ / (1.4826 MAD √(1 − h̄))`
-//!   (h̄ = tr H / n).
+//!   weights of the studentised residual norm `‖((vx − ux)/r, vz − uz) − median‖ / (1.4826 MAD √(1 − h̄))`
+//!   (per-component medians; MAD = median of those norms; h̄ = tr H / n).
 //!
 //! No IPC: the `regulariser` node calls it (`method = "divergence-free"`).
 
@@ -547,20 +547,19 @@ impl DivFree {
             report.trace_h = tr;
             self.velocity(&psi, vx, vz);
             if pass + 1 < passes {
-                // Robust weights from the studentised residual norm.
+                // Robust weights from the studentised residual norm (as smoothn: per-component
+                // medians removed, MAD = median of the norms of the centred residual vectors).
                 let h = (tr / n_eff).clamp(0.0, 0.99);
-                let res: Vec<f64> =
-                    (0..n).map(|p| (((vx[p] - ux0[p]) / r).powi(2) + (vz[p] - uz0[p]).powi(2)).sqrt()).collect();
-                let mut valid: Vec<f64> = (0..n).filter(|&p| base[p] > 0.0).map(|p| res[p]).collect();
-                let med = median(&mut valid);
-                let mut dev: Vec<f64> = valid.iter().map(|v| (v - med).abs()).collect();
-                let mad = median(&mut dev);
+                let idx: Vec<usize> = (0..n).filter(|&p| base[p] > 0.0).collect();
+                let mut rx: Vec<f64> = idx.iter().map(|&p| (vx[p] - ux0[p]) / r).collect();
+                let mut rz: Vec<f64> = idx.iter().map(|&p| vz[p] - uz0[p]).collect();
+                let (mx, mz) = (median(&mut rx.clone()), median(&mut rz.clone()));
+                let norms: Vec<f64> = rx.iter_mut().zip(rz.iter_mut()).map(|(a, b)| (*a - mx).hypot(*b - mz)).collect();
+                let mad = median(&mut norms.clone());
                 let scale = 1.4826 * mad * (1.0 - h).sqrt();
-                for p in 0..n {
-                    if base[p] > 0.0 {
-                        let u = if scale > 0.0 { res[p] / scale } else { 0.0 };
-                        w[p] = base[p] * params.weight_function.weight(u);
-                    }
+                for (&p, nrm) in idx.iter().zip(&norms) {
+                    let u = if scale > 0.0 { nrm / scale } else { 0.0 };
+                    w[p] = base[p] * params.weight_function.weight(u);
                 }
             }
         }
@@ -600,10 +599,13 @@ impl DivFree {
     /// Numeric Cholesky factor of `data + S·penalty + ε I`.
     fn factor(&self, data: &[f64], s: f64) -> Result<Llt<usize, f64>, DivFreeError> {
         let mut vals: Vec<f64> = data.iter().zip(&self.pen_vals).map(|(a, b)| a + s * b).collect();
+        // ψ's null space (a constant and the corner checkerboard, invisible in the velocity) is
+        // removed exactly by pinning ψ at corners (0, 0) and (0, 1) to 0: a unique minimiser
+        // with the same velocity, and no ridge that would compete with the data or the penalty.
         let mean_diag = self.diag.iter().map(|&k| vals[k]).sum::<f64>() / self.diag.len() as f64;
-        let eps = 1e-10 * mean_diag.max(f64::MIN_POSITIVE);
-        for &k in &self.diag {
-            vals[k] += eps;
+        let pin = if mean_diag > 0.0 && mean_diag.is_finite() { mean_diag } else { 1.0 };
+        for &k in &self.diag[..2] {
+            vals[k] += pin;
         }
         Llt::try_new_with_symbolic(
             self.llt_symbolic.clone(),
