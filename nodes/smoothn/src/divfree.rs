@@ -158,7 +158,8 @@ pub struct DivFreeReport {
     pub s: f64,
     /// Noise ratio r = σx/σz used.
     pub noise_ratio: f64,
-    /// Whether S was chosen by GCV (false: given, or block cross-validation).
+    /// Whether S was chosen by GCV (asked for, or block CV impossible because the data region is
+    /// smaller than two blocks); false: given, or block cross-validation.
     pub s_from_gcv: bool,
     /// Estimated trace of the influence matrix (last pass).
     pub trace_h: f64,
@@ -171,6 +172,9 @@ pub struct DivFreeReport {
     /// Largest |discrete divergence| of the result relative to max|v|/min(dz, dx) (round-off).
     pub max_divergence: f64,
 }
+
+/// Relative weight of the zero-velocity ridge on every pixel ([`DivFree::data_matrix`]).
+const RIDGE: f64 = 1e-6;
 
 /// A linear functional of ψ: at most `CAP` (corner, coefficient) pairs.
 const CAP: usize = 24;
@@ -516,14 +520,17 @@ impl DivFree {
             let s = match s_used {
                 Some(s) => s,
                 None => {
-                    report.s_from_gcv = params.selection == Selection::Gcv;
+                    report.s_from_gcv = false;
                     let hint = s_hint.filter(|h| h.is_finite() && *h > 0.0).map(f64::log10).unwrap_or(1.0);
                     let best = match params.selection {
-                        Selection::BlockCv => {
+                        Selection::BlockCv if BlockCv::possible(self, &w, params.cv_block) => {
                             let cv = BlockCv::new(self, &w, &ux0, &uz0, r2, params.cv_block);
                             bracket_min(hint, |ls| cv.score(self, 10f64.powf(ls), &mut report))?
                         }
-                        Selection::Gcv => bracket_min(hint, |ls| {
+                        // Block CV needs data outside every fold (grid or data region smaller
+                        // than two blocks): fall back to GCV.
+                        _ => bracket_min(hint, |ls| {
+                            report.s_from_gcv = true;
                             let s = 10f64.powf(ls);
                             report.factorisations += 1;
                             let llt = self.factor(&data_vals, s)?;
@@ -581,16 +588,21 @@ impl DivFree {
     }
 
     /// Data part of the normal matrix for weights `w`, on the pattern.
+    ///
+    /// Every pixel also gets a vanishing weight `RIDGE × max w` towards zero velocity (the
+    /// right-hand side does not see it): where the data leave the penalty's null space
+    /// undetermined (data on one line, a cross-validation fold without data) the system stays
+    /// positive definite and the undetermined part of the flow goes to zero; where there are
+    /// data it changes the fit by a relative 1e-6.
     fn data_matrix(&self, w: &[f64], r2: f64) -> Vec<f64> {
         let pat = me_pattern(&self.col_ptr, &self.row_idx);
         let mut vals = vec![0.0; self.row_idx.len()];
+        let ridge = RIDGE * w.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
         for i in 0..self.nz {
             for j in 0..self.nx {
-                let p = i * self.nx + j;
-                if w[p] > 0.0 {
-                    me_accumulate(&pat, &mut vals, &self.vx_functional(i, j), w[p] / r2);
-                    me_accumulate(&pat, &mut vals, &self.vz_functional(i, j), w[p]);
-                }
+                let wp = w[i * self.nx + j] + ridge;
+                me_accumulate(&pat, &mut vals, &self.vx_functional(i, j), wp / r2);
+                me_accumulate(&pat, &mut vals, &self.vz_functional(i, j), wp);
             }
         }
         vals
@@ -681,6 +693,22 @@ struct BlockCv {
 }
 
 impl BlockCv {
+    /// Whether every fold that holds data out leaves some data to fit.
+    fn possible(f: &DivFree, w: &[f64], block: usize) -> bool {
+        let b = block.max(1);
+        let mut per_fold = [0usize; 4];
+        let mut total = 0usize;
+        for i in 0..f.nz {
+            for j in 0..f.nx {
+                if w[i * f.nx + j] > 0.0 {
+                    per_fold[2 * ((i / b) % 2) + (j / b) % 2] += 1;
+                    total += 1;
+                }
+            }
+        }
+        per_fold.iter().all(|&k| k == 0 || k < total) && per_fold.iter().filter(|&&k| k > 0).count() >= 2
+    }
+
     fn new(f: &DivFree, w: &[f64], ux: &[f64], uz: &[f64], r2: f64, block: usize) -> Self {
         let (nz, nx) = (f.nz, f.nx);
         let b = block.max(1);

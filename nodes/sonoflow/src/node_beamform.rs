@@ -783,5 +783,44 @@ mod tests {
         assert!(e.contains("rx_angles_deg[0]"), "{e}");
         let e = validate_beamformer(&serde_json::json!({"fnumber": 0.0})).unwrap_err();
         assert!(e.contains("fnumber > 0"), "{e}");
+        let e = validate_beamformer(&serde_json::json!({"demod_fc": -3.6e6})).unwrap_err();
+        assert!(e.contains("demod_fc") && e.contains("Hz"), "{e}");
+    }
+
+    /// `demod_fc` moves the demodulation: a 3.6 MHz tone on every element becomes a constant
+    /// (DC) I/Q trace when demodulated at 3.6 MHz, a 1.4 MHz beat at the RF's fc (5 MHz); the I/Q
+    /// header then carries 3.6 MHz, which the Doppler nodes use to convert phase to velocity.
+    #[test]
+    fn demod_fc_sets_the_demodulation_and_the_iq_fc() {
+        let (ns, ne, fs) = (400usize, 4usize, 20e6);
+        let h = sonoflow_messages::RfFrameHeaderV1 {
+            fs,
+            fc: 5e6,
+            c: 1540.0,
+            pitch: 0.3e-3,
+            prf: 1e4,
+            n_channels: ne as u32,
+            n_samples: ns as u32,
+            sample_format: SAMPLE_RF_F32,
+            ..Default::default()
+        };
+        let rf: Vec<f32> =
+            (0..ne * ns).map(|k| (2.0 * std::f64::consts::PI * 3.6e6 * (k % ns) as f64 / fs).cos() as f32).collect();
+        let phase_spread = |demod: Option<f64>| {
+            let p = BeamformerParams { demod_fc: demod, bandwidth: Some(20.0), fnumber: 1.0, ..Default::default() };
+            let mut bf = Beamformer::new(p).unwrap();
+            bf.demodulate(&h, &rf).unwrap();
+            let fc = bf.iq_header(&h, 0).fc;
+            // phase change along the middle of element 0's trace (away from the filter's edges)
+            let mid = &bf.iq[100..300];
+            let dphi = mid.windows(2).map(|w| (w[1] * w[0].conj()).arg().abs()).fold(0.0f32, f32::max);
+            (fc, dphi, mid.iter().map(|c| c.norm()).sum::<f32>() / 200.0)
+        };
+        let (fc, dphi, amp) = phase_spread(Some(3.6e6));
+        assert_eq!(fc, 3.6e6);
+        assert!(dphi < 1e-3 && amp > 0.4, "at 3.6 MHz the tone is DC: phase step {dphi}, amplitude {amp}");
+        let (fc, _, amp) = phase_spread(None);
+        assert_eq!(fc, 5e6);
+        assert!(amp < 0.05, "a 20 % band around 5 MHz rejects the 3.6 MHz tone: amplitude {amp}");
     }
 }

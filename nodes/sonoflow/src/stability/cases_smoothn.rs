@@ -1,11 +1,14 @@
 //! smoothn cases (from `nodes/smoothn/tests/extremes.rs` and `robustness.rs`, plus 90 % missing
-//! data and 200 decades of scale).
+//! data and 200 decades of scale), and the divergence-free regulariser (`smoothn::divfree`): no
+//! data, 200 decades of scale, extreme noise anisotropy, the smallest grid, a one-pixel-wide
+//! data line and the S bounds (conditioning).
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::{smoothn, SmoothnParams};
+use sonoflow_smoothn::divfree::divergence;
+use sonoflow_smoothn::{smoothn, DivFree, DivFreeParams, SmoothnParams};
 
 pub(super) fn cases() -> Vec<Case> {
     fn c(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
@@ -75,7 +78,201 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::ClearError(&["weight at grid index 4", "finite and ≥ 0"]),
             negative_weight,
         ),
+        c(
+            "divfree-all-missing",
+            "divergence-free fit of a 12 x 16 field that is NaN everywhere",
+            Expected::ClearError(&["no valid data"]),
+            df_all_missing,
+        ),
+        c(
+            "divfree-scale-1e-100-and-1e100",
+            "divergence-free fit (robust, block-CV S, estimated noise ratio) of a noisy channel flow multiplied by \
+             1e-100 and 1e100; check: same S (relative 1e-9) and noise ratio, the result scales (relative 1e-6: the system's \
+             conditioning amplifies the last-bit differences of the scaled data)",
+            Expected::Pass,
+            df_scale,
+        ),
+        c(
+            "divfree-noise-ratio-1000",
+            "noise ratio sigma_x/sigma_z = 1000 (the lateral data carry no weight) and 0.001 (the axial none), data \
+             noisy accordingly (sigma 0.05 vs 0.001 m/s), S by block CV; check: finite, divergence-free to 1e-12, the \
+             well-weighted component within 2 % of u0",
+            Expected::Pass,
+            df_anisotropy,
+        ),
+        c(
+            "divfree-smallest-grid",
+            "a 5 x 5 grid (order 3 needs >= 5 per axis), robust, automatic S; check: finite, divergence-free",
+            Expected::Pass,
+            df_smallest,
+        ),
+        c(
+            "divfree-one-pixel-line",
+            "data on a single row of a 30 x 40 grid only (everything else missing); check: finite everywhere, \
+             the row's vx reproduced within 1 % of u0",
+            Expected::Pass,
+            df_line,
+        ),
+        c(
+            "divfree-s-1e-6-and-1e9",
+            "given S = 1e-6 and S = 1e9 (12 decades of conditioning) on a noisy channel; check: both factorise, \
+             finite, divergence-free to 1e-12",
+            Expected::Pass,
+            df_s_bounds,
+        ),
     ]
+}
+
+/// Poiseuille channel along x (width 60 % of the grid height, u0 = 0.5 m/s) with N(0, σ²) noise,
+/// σx = 0.05, σz = 0.01 (the vector-Doppler anisotropy); returns (ux, uz, tx, tz, mask).
+#[allow(clippy::type_complexity)]
+fn df_channel(nz: usize, nx: usize, seed: u64) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>), String> {
+    df_channel_noise(nz, nx, seed, 0.05, 0.01)
+}
+
+/// [`df_channel`] with noise levels `sx`, `sz`.
+#[allow(clippy::type_complexity)]
+fn df_channel_noise(
+    nz: usize,
+    nx: usize,
+    seed: u64,
+    sx: f64,
+    sz: f64,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>), String> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (nxn, nzn) = (Normal::new(0.0, sx).msg()?, Normal::new(0.0, sz).msg()?);
+    let n = nz * nx;
+    let (mut ux, mut uz, mut tx, tz, mut m) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    for i in 0..nz {
+        let q = (i as f64 - (nz as f64 - 1.0) / 2.0) / (0.3 * nz as f64);
+        for j in 0..nx {
+            let p = i * nx + j;
+            if q.abs() <= 1.0 {
+                tx[p] = 0.5 * (1.0 - q * q);
+                m[p] = 1.0;
+            }
+            ux[p] = tx[p] + nxn.sample(&mut rng);
+            uz[p] = tz[p] + nzn.sample(&mut rng);
+        }
+    }
+    Ok((ux, uz, tx, tz, m))
+}
+
+fn max_div(vx: &[f64], vz: &[f64], shape: [usize; 2]) -> f64 {
+    let vmax = vx.iter().chain(vz).fold(0.0f64, |a, v| a.max(v.abs()));
+    let d = divergence(vx, vz, shape, [2e-4, 2e-4]).iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if vmax > 0.0 {
+        d * 2e-4 / vmax
+    } else {
+        0.0
+    }
+}
+
+fn df_all_missing(_: &Ctx) -> CaseResult {
+    let f = DivFree::new([12, 16], [2e-4, 2e-4], 3).msg()?;
+    let (mut vx, mut vz) = (vec![0.0; 192], vec![0.0; 192]);
+    f.fit(&[f64::NAN; 192], &[f64::NAN; 192], None, &DivFreeParams::default(), &mut vx, &mut vz)
+        .map(|_| Check::new(false, "returned a result from no data"))
+        .msg()
+}
+
+fn df_scale(_: &Ctx) -> CaseResult {
+    let (nz, nx) = (24, 32);
+    let (ux, uz, _, _, m) = df_channel(nz, nx, 31)?;
+    let f = DivFree::new([nz, nx], [2e-4, 2e-4], 3).msg()?;
+    let p = DivFreeParams::default();
+    let (mut ax, mut az) = (vec![0.0; nz * nx], vec![0.0; nz * nx]);
+    let r1 = f.fit(&ux, &uz, Some(&m), &p, &mut ax, &mut az).msg()?;
+    let mut ok = true;
+    let mut parts = vec![];
+    for scale in [1e-100, 1e100] {
+        let (sx, sz): (Vec<f64>, Vec<f64>) =
+            (ux.iter().map(|v| v * scale).collect(), uz.iter().map(|v| v * scale).collect());
+        let (mut bx, mut bz) = (vec![0.0; nz * nx], vec![0.0; nz * nx]);
+        let rs = f.fit(&sx, &sz, Some(&m), &p, &mut bx, &mut bz).msg()?;
+        let vmax = ax.iter().chain(&az).fold(0.0f64, |a, v| a.max(v.abs()));
+        let rel =
+            bx.iter().chain(&bz).zip(ax.iter().chain(&az)).map(|(b, a)| (b / scale - a).abs()).fold(0.0, f64::max)
+                / vmax;
+        ok &= (rs.s / r1.s - 1.0).abs() < 1e-9 && (rs.noise_ratio / r1.noise_ratio - 1.0).abs() < 1e-12 && rel < 1e-6;
+        parts.push(format!("x{scale:e}: S {:.3} ({:.3}), max relative deviation {rel:.1e}", rs.s, r1.s));
+    }
+    Ok(Check::new(ok, parts.join("; ")))
+}
+
+fn df_anisotropy(_: &Ctx) -> CaseResult {
+    let (nz, nx) = (24, 32);
+    let f = DivFree::new([nz, nx], [2e-4, 2e-4], 3).msg()?;
+    let mut parts = vec![];
+    let mut ok = true;
+    for ratio in [1000.0, 1e-3] {
+        // the data match the stated ratio: noisy x and precise z, or the reverse
+        let (sx, sz) = if ratio > 1.0 { (0.05, 0.001) } else { (0.001, 0.05) };
+        let (ux, uz, tx, tz, m) = df_channel_noise(nz, nx, 32, sx, sz)?;
+        let p = DivFreeParams { noise_ratio: Some(ratio), ..Default::default() };
+        let (mut vx, mut vz) = (vec![0.0; nz * nx], vec![0.0; nz * nx]);
+        let r = f.fit(&ux, &uz, Some(&m), &p, &mut vx, &mut vz).msg()?;
+        let fin = vx.iter().chain(&vz).all(|v| v.is_finite());
+        let div = max_div(&vx, &vz, [nz, nx]);
+        // the component that keeps its weight: z for ratio 1000, x for 0.001
+        let (est, truth) = if ratio > 1.0 { (&vz, &tz) } else { (&vx, &tx) };
+        let err = (0..nz * nx).filter(|&p| m[p] > 0.0).map(|p| (est[p] - truth[p]).abs()).fold(0.0, f64::max) / 0.5;
+        ok &= fin && div < 1e-12 && err < 0.02;
+        parts.push(format!(
+            "ratio {ratio}: S {:.3e}, finite {fin}, div {div:.1e}, max error {:.2} % of u0",
+            r.s,
+            100.0 * err
+        ));
+    }
+    Ok(Check::new(ok, parts.join("; ")))
+}
+
+fn df_smallest(_: &Ctx) -> CaseResult {
+    let (ux, uz, _, _, _) = df_channel(5, 5, 33)?;
+    let f = DivFree::new([5, 5], [2e-4, 2e-4], 3).msg()?;
+    let (mut vx, mut vz) = (vec![0.0; 25], vec![0.0; 25]);
+    let r = f.fit(&ux, &uz, None, &DivFreeParams::default(), &mut vx, &mut vz).msg()?;
+    let fin = vx.iter().chain(&vz).all(|v| v.is_finite());
+    let div = max_div(&vx, &vz, [5, 5]);
+    Ok(Check::new(fin && div < 1e-12, format!("S {:.3e}, finite {fin}, divergence {div:.1e}", r.s)))
+}
+
+fn df_line(_: &Ctx) -> CaseResult {
+    let (nz, nx) = (30, 40);
+    let n = nz * nx;
+    let (mut ux, uz) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+    let mut uz = uz;
+    for j in 0..nx {
+        ux[15 * nx + j] = 0.5;
+        uz[15 * nx + j] = 0.0;
+    }
+    let f = DivFree::new([nz, nx], [2e-4, 2e-4], 3).msg()?;
+    let (mut vx, mut vz) = (vec![0.0; n], vec![0.0; n]);
+    let r = f.fit(&ux, &uz, None, &DivFreeParams::default(), &mut vx, &mut vz).msg()?;
+    let fin = vx.iter().chain(&vz).all(|v| v.is_finite());
+    let err = (0..nx).map(|j| (vx[15 * nx + j] - 0.5).abs()).fold(0.0, f64::max) / 0.5;
+    Ok(Check::new(
+        fin && err < 0.01,
+        format!("S {:.3e}, finite everywhere {fin}, max error on the row {:.3} % of u0", r.s, 100.0 * err),
+    ))
+}
+
+fn df_s_bounds(_: &Ctx) -> CaseResult {
+    let (nz, nx) = (24, 32);
+    let (ux, uz, _, _, m) = df_channel(nz, nx, 34)?;
+    let f = DivFree::new([nz, nx], [2e-4, 2e-4], 3).msg()?;
+    let mut parts = vec![];
+    let mut ok = true;
+    for s in [1e-6, 1e9] {
+        let p = DivFreeParams { s: Some(s), ..Default::default() };
+        let (mut vx, mut vz) = (vec![0.0; nz * nx], vec![0.0; nz * nx]);
+        f.fit(&ux, &uz, Some(&m), &p, &mut vx, &mut vz).msg()?;
+        let fin = vx.iter().chain(&vz).all(|v| v.is_finite());
+        let div = max_div(&vx, &vz, [nz, nx]);
+        ok &= fin && div < 1e-12;
+        parts.push(format!("S = {s:e}: finite {fin}, divergence {div:.1e}"));
+    }
+    Ok(Check::new(ok, parts.join("; ")))
 }
 
 /// (cos 2πx sin πy, sin 2πx cos 1.5πy + 0.3) on an ny × nx grid, component-major.
