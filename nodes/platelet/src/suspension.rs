@@ -10,8 +10,8 @@
 //!
 //! **Carrier from fluid particles** (`carrier = { type = "particles", … }`, [`ParticleCarrier`];
 //! Algorithm 2 step 2 with an SPH fluid): the carrier is a [`LatticeField`] filled from scattered
-//! fluid particles by [`ShepardInterpolator`] (module `dynamics::shepard`: SPH interpolation,
-//! fluid-fraction mask, eq 12 per cell). There is no flow before the first fluid snapshot, so such
+//! fluid particles by [`ParticleInterpolator`] (module `dynamics::sph_interp`: SPH kernel
+//! interpolation, first-order by default, fluid-fraction mask, eq 12 per cell). There is no flow before the first fluid snapshot, so such
 //! a suspension is built by [`Suspension::with_fluid`] (seeding, `{ count }` in the lattice cells
 //! whose four nodes have fluid, and the relaxed start use that snapshot) and each later snapshot
 //! replaces the lattice velocities through [`Suspension::set_fluid`]; [`Suspension::new`]
@@ -20,7 +20,7 @@
 use crate::coefficients::CoefficientModel;
 use crate::dynamics::{
     CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FillReport, FlowError, LatticeField,
-    ParticleState, Particles, ShepardInterpolator, ShepardParams, SimpleShear, SphKernel, Stenosis, Timings,
+    InterpOrder, InterpParams, ParticleInterpolator, ParticleState, Particles, SimpleShear, SphKernel, Stenosis, Timings,
     DEFAULT_DENSITY,
 };
 use crate::nn::model::NetworkModel;
@@ -54,7 +54,7 @@ fn d_min_fraction() -> f64 {
 }
 
 /// Largest number of lattice nodes of a `particles` carrier.
-pub const MAX_LATTICE_NODES: usize = 16_000_000;
+pub const MAX_LATTICE_NODES: usize = 4_000_000;
 /// Largest kernel support of a `particles` carrier, in lattice spacings (cost per particle and
 /// snapshot ∝ its square).
 pub const MAX_SUPPORT_SPACINGS: f64 = 64.0;
@@ -89,6 +89,10 @@ pub struct ParticleCarrier {
     /// Lattice nodes with a fluid fraction below this carry no flow (0 < value <= 1). Default 0.5.
     #[serde(default = "d_min_fraction")]
     pub min_fraction: f64,
+    /// Interpolant: `linear` (default; first-order moving least squares, exact for linear
+    /// fields) or `shepard` (normalised kernel sum).
+    #[serde(default)]
+    pub interpolation: InterpOrder,
     /// Straight walls y = lo and y = hi \[m\] the platelet centres are kept between (reflection,
     /// as in the analytic channel); absent (default): none (the mask alone stops the flow at
     /// the lumen's edge).
@@ -98,8 +102,8 @@ pub struct ParticleCarrier {
 
 impl ParticleCarrier {
     /// The interpolation's parameters.
-    pub fn shepard(&self) -> ShepardParams {
-        ShepardParams { kernel: self.kernel, h: self.kernel_h, min_fraction: self.min_fraction }
+    pub fn interp(&self) -> InterpParams {
+        InterpParams { kernel: self.kernel, h: self.kernel_h, min_fraction: self.min_fraction, order: self.interpolation }
     }
 
     /// Every field in range (errors name `carrier.<field>`).
@@ -120,7 +124,7 @@ impl ParticleCarrier {
                 format!("nx >= 2, ny >= 2, nx * ny <= {MAX_LATTICE_NODES}"),
             ));
         }
-        self.shepard().validate().map_err(|e| match e {
+        self.interp().validate().map_err(|e| match e {
             FlowError::Invalid { field, value, allowed } => invalid(format!("carrier.{field}"), value, allowed),
             e => SuspensionError::Flow(e),
         })?;
@@ -319,8 +323,8 @@ enum Carrier {
     Channel(Channel, f64),
     Stenosis(Stenosis),
     Shear(SimpleShear, f64, f64),
-    /// The lattice (no fluid until the first [`ShepardInterpolator::fill`]) and its interpolator.
-    Particles(Box<(ParticleCarrier, LatticeField, ShepardInterpolator)>),
+    /// The lattice (no fluid until the first [`ParticleInterpolator::fill`]) and its interpolator.
+    Particles(Box<(ParticleCarrier, LatticeField, ParticleInterpolator)>),
 }
 
 impl Carrier {
@@ -353,7 +357,7 @@ impl Carrier {
                 let l = &pc.lattice;
                 let field = LatticeField::new(l.origin, l.h, l.nx, l.ny, vec![[0.0; 2]; l.nx * l.ny])?
                     .with_walls(pc.walls);
-                Carrier::Particles(Box::new((pc, field, ShepardInterpolator::new(pc.shepard())?)))
+                Carrier::Particles(Box::new((pc, field, ParticleInterpolator::new(pc.interp())?)))
             }
         })
     }
@@ -799,7 +803,7 @@ mod tests {
 
     /// The suspension in a `particles` carrier: seeded in the lattice cells with fluid, relaxed to
     /// the interpolated flow, carried at the Poiseuille speed (minus the kernel's smoothing bias
-    /// u_max M₂/(2a²) = 0.6 % with h = 0.48 mm, a = 4 mm; module `dynamics::shepard`), and a new
+    /// u_max M₂/(2a²) = 0.6 % with h = 0.48 mm, a = 4 mm; module `dynamics::sph_interp`), and a new
     /// snapshot takes effect at the next macro step.
     #[test]
     fn platelets_ride_a_fluid_given_as_particles() {

@@ -14,12 +14,12 @@
 //! carrier. Following an acquisition schedule (PRF times inside a macro step) is future work.
 //!
 //! **SPH carrier** (`carrier = { type = "particles", lattice = { origin, h, nx, ny }, kernel_h,
-//! kernel, min_fraction, walls }`, [`ParticleCarrier`]; needs the input `particles` wired, and
+//! kernel, min_fraction, interpolation, walls }`, [`ParticleCarrier`]; needs the input `particles` wired, and
 //! that input needs this carrier — `sonoflow check` says so): each fluid snapshot's particles of
 //! kind `PARTICLE_FLUID` (positions and velocities, both on the wire) are mapped from imaging into
 //! channel coordinates with the inverse of the output mapping below (any `angle_deg`), then
-//! interpolated onto the lattice (SPH Shepard sums, fluid-fraction mask, eq 12 per cell:
-//! `sonoflow_platelet::dynamics::shepard`). The first snapshot fixes t₀ (its `t_valid`), seeds the
+//! interpolated onto the lattice (SPH kernel fit, first order by default, fluid-fraction mask,
+//! eq 12 per cell: `sonoflow_platelet::dynamics::sph_interp`). The first snapshot fixes t₀ (its `t_valid`), seeds the
 //! platelets and relaxes them. As in Algorithm 2 (Navier–Stokes t_{n−1} → t_n, transfer, particles
 //! t_{n−1} → t_n), the macro step [t, t + k] uses the latest snapshot with t_valid ≤ t + k (to
 //! within 1e-6 k): the node reads the input until it holds a later snapshot or the end of the
@@ -345,8 +345,8 @@ struct FluidReport {
 
 fn log_fill(what: &str, snap: &FluidSnapshot, r: &FillReport) {
     eprintln!(
-        "platelets: {what} fluid snapshot {} (t = {:.6} s): {} fluid particles, {} near the lattice, {} of {} nodes with fluid, particle volume {:.3e} m²",
-        snap.frame_id, snap.t, r.particles, r.used, r.valid_nodes, r.nodes, r.volume
+        "platelets: {what} fluid snapshot {} (t = {:.6} s): {} fluid particles, {} near the lattice, {} of {} nodes with fluid ({} by the Shepard fallback), particle volume {:.3e} m²",
+        snap.frame_id, snap.t, r.particles, r.used, r.valid_nodes, r.nodes, r.shepard_fallback, r.volume
     );
 }
 

@@ -17,7 +17,7 @@
 //!   lattice are clamped onto it. Nodes carry a validity mask (all valid unless set with
 //!   [`LatticeField::set_velocities_masked`]); an invalid node (no fluid there, e.g. outside the
 //!   lumen of an SPH carrier) must carry v = 0, so the interpolant falls to zero across the last
-//!   cell like a no-slip wall. [`super::shepard`] fills a lattice from scattered SPH particles.
+//!   cell like a no-slip wall. [`super::sph_interp`] fills a lattice from scattered SPH particles.
 //! - [`super::Stenosis`] (module `stenosis`): section 5.2's channel with a 25 % narrowing, from the
 //!   lubrication approximation; its walls vary along x ([`CarrierFlow::local_walls`]).
 
