@@ -50,7 +50,7 @@ fn d_shear_extent() -> f64 {
     1e-3
 }
 fn d_min_fraction() -> f64 {
-    0.5
+    0.4
 }
 
 /// Largest number of lattice nodes of a `particles` carrier.
@@ -86,7 +86,8 @@ pub struct ParticleCarrier {
     /// Kernel: `quartic-spline` (default, the SPH solver's) or `wendland-c2`.
     #[serde(default)]
     pub kernel: SphKernel,
-    /// Lattice nodes with a fluid fraction below this carry no flow (0 < value <= 1). Default 0.5.
+    /// Lattice nodes with a fluid fraction below this carry no flow (0 < value <= 1). Default 0.4
+    /// (a node on a flat wall has ½; module `dynamics::sph_interp`).
     #[serde(default = "d_min_fraction")]
     pub min_fraction: f64,
     /// Interpolant: `linear` (default; first-order moving least squares, exact for linear
@@ -767,7 +768,7 @@ mod tests {
     fn particle_carrier_parses_and_names_bad_fields() {
         let p = particle_carrier_params(10);
         let CarrierParams::Particles(pc) = p.carrier else { panic!("{:?}", p.carrier) };
-        assert_eq!((pc.kernel, pc.min_fraction, pc.walls), (SphKernel::QuarticSpline, 0.5, Some([0.0, 8e-3])));
+        assert_eq!((pc.kernel, pc.min_fraction, pc.walls), (SphKernel::QuarticSpline, 0.4, Some([0.0, 8e-3])));
         p.validate().unwrap();
         let with = |patch: &str| {
             let base = r#""type": "particles", "lattice": {"origin": [0, 0], "h": 1e-4, "nx": 11, "ny": 11}"#;

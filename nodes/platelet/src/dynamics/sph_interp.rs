@@ -148,7 +148,7 @@ pub enum InterpOrder {
 }
 
 fn d_min_fraction() -> f64 {
-    0.5
+    0.4
 }
 
 /// Normalised determinant of the moment matrix below which the linear fit falls back to Shepard.
@@ -164,7 +164,8 @@ pub struct InterpParams {
     /// Smoothing length h \[m\] (the SPH run's, e.g. 1.2 × its particle spacing). Required.
     pub h: f64,
     /// Nodes whose fluid fraction φ is below this are invalid (module doc), 0 < min_fraction ≤ 1.
-    /// Default 0.5 (a node on a wall has φ ≈ ½).
+    /// Default 0.4: a node on a flat wall (φ ≈ ½) is valid, and with the linear fit carries about
+    /// the no-slip value; one more than 0.17 h (quartic; Wendland 0.14 h) beyond it is not.
     #[serde(default = "d_min_fraction")]
     pub min_fraction: f64,
     /// Interpolant. Default `linear`.
@@ -445,7 +446,7 @@ mod tests {
     }
 
     fn params(kernel: SphKernel, h: f64, order: InterpOrder) -> InterpParams {
-        InterpParams { kernel, h, min_fraction: 0.5, order }
+        InterpParams { kernel, h, min_fraction: 0.4, order }
     }
 
     /// Gaussian elimination with partial pivoting (the naive reference for the 3 × 3 fits).
