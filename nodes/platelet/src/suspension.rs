@@ -1,4 +1,4 @@
-//! A platelet suspension ready to run (paper 2, Algorithm 2 with an analytic carrier): a carrier
+//! A platelet suspension ready to run (paper 2, Algorithm 2 with an analytic or SPH carrier): a carrier
 //! flow, the particles, the dynamics and the coefficient model, built from plain serde parameters
 //! (the `[params]` of the `platelets` node deserialise into [`SuspensionParams`]).
 //!
@@ -19,9 +19,9 @@
 
 use crate::coefficients::CoefficientModel;
 use crate::dynamics::{
-    CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FillReport, FlowError, LatticeField,
-    InterpOrder, InterpParams, ParticleInterpolator, ParticleState, Particles, SimpleShear, SphKernel, Stenosis, Timings,
-    DEFAULT_DENSITY,
+    CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FillReport, FlowError, InterpOrder,
+    InterpParams, LatticeField, ParticleInterpolator, ParticleState, Particles, SimpleShear, SphKernel, Stenosis,
+    Timings, DEFAULT_DENSITY,
 };
 use crate::nn::model::NetworkModel;
 use crate::nn::NnError;
@@ -104,7 +104,12 @@ pub struct ParticleCarrier {
 impl ParticleCarrier {
     /// The interpolation's parameters.
     pub fn interp(&self) -> InterpParams {
-        InterpParams { kernel: self.kernel, h: self.kernel_h, min_fraction: self.min_fraction, order: self.interpolation }
+        InterpParams {
+            kernel: self.kernel,
+            h: self.kernel_h,
+            min_fraction: self.min_fraction,
+            order: self.interpolation,
+        }
     }
 
     /// Every field in range (errors name `carrier.<field>`).
@@ -151,7 +156,11 @@ impl ParticleCarrier {
                 return Err(invalid(
                     "carrier.walls",
                     format!("[{lo}, {hi}]"),
-                    format!("walls overlapping the lattice's y range [{}, {}] m", l.origin[1], l.origin[1] + (l.ny - 1) as f64 * l.h),
+                    format!(
+                        "walls overlapping the lattice's y range [{}, {}] m",
+                        l.origin[1],
+                        l.origin[1] + (l.ny - 1) as f64 * l.h
+                    ),
                 ));
             }
         }
@@ -161,7 +170,8 @@ impl ParticleCarrier {
     /// x range and y range of the lattice (y clipped to the walls).
     fn bbox(&self) -> [f64; 4] {
         let l = &self.lattice;
-        let mut b = [l.origin[0], l.origin[0] + (l.nx - 1) as f64 * l.h, l.origin[1], l.origin[1] + (l.ny - 1) as f64 * l.h];
+        let mut b =
+            [l.origin[0], l.origin[0] + (l.nx - 1) as f64 * l.h, l.origin[1], l.origin[1] + (l.ny - 1) as f64 * l.h];
         if let Some([lo, hi]) = self.walls {
             b[2] = b[2].max(lo);
             b[3] = b[3].min(hi);
@@ -356,8 +366,8 @@ impl Carrier {
             CarrierParams::Particles(pc) => {
                 pc.validate()?;
                 let l = &pc.lattice;
-                let field = LatticeField::new(l.origin, l.h, l.nx, l.ny, vec![[0.0; 2]; l.nx * l.ny])?
-                    .with_walls(pc.walls);
+                let field =
+                    LatticeField::new(l.origin, l.h, l.nx, l.ny, vec![[0.0; 2]; l.nx * l.ny])?.with_walls(pc.walls);
                 Carrier::Particles(Box::new((pc, field, ParticleInterpolator::new(pc.interp())?)))
             }
         })
@@ -772,7 +782,8 @@ mod tests {
         p.validate().unwrap();
         let with = |patch: &str| {
             let base = r#""type": "particles", "lattice": {"origin": [0, 0], "h": 1e-4, "nx": 11, "ny": 11}"#;
-            parse(&format!(r#"{{"carrier": {{{base}, {patch}}}}}"#)).and_then(|p| p.validate().map_err(|e| e.to_string()))
+            parse(&format!(r#"{{"carrier": {{{base}, {patch}}}}}"#))
+                .and_then(|p| p.validate().map_err(|e| e.to_string()))
         };
         with(r#""kernel_h": 2e-4"#).unwrap();
         for (patch, want) in [
@@ -842,7 +853,10 @@ mod tests {
                 n_axis += 1;
             }
         }
-        eprintln!("particles carrier: {n_axis} platelets away from the walls, worst |dx/k − (u − bias)| = {:.3} % of u_max", 100.0 * worst);
+        eprintln!(
+            "particles carrier: {n_axis} platelets away from the walls, worst |dx/k − (u − bias)| = {:.3} % of u_max",
+            100.0 * worst
+        );
         assert!(n_axis > 100 && worst < 0.005, "{n_axis}, {worst}");
         // a new snapshot with twice the speed takes effect in the next step
         let (pos2, vel2) = poiseuille_cloud(u_max, a, 0.4e-3, 2.0);
@@ -857,7 +871,12 @@ mod tests {
             }
         }
         // an analytic suspension has no fluid to set
-        let mut an = Suspension::new(&SuspensionParams { model: ModelKind::Standin, particles: ParticlesSpec::Count { count: 2 }, ..Default::default() }).unwrap();
+        let mut an = Suspension::new(&SuspensionParams {
+            model: ModelKind::Standin,
+            particles: ParticlesSpec::Count { count: 2 },
+            ..Default::default()
+        })
+        .unwrap();
         assert!(an.set_fluid(&pos, &vel).is_err());
         // a lattice beside the fluid has nothing to seed into
         let mut far = particle_carrier_params(3);

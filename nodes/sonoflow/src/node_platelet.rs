@@ -45,8 +45,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use sonoflow_messages::kinds::ParticleSnapshot;
 use sonoflow_messages::*;
-use sonoflow_node_kit::{thread_cpu_ns, Kit};
 use sonoflow_node_kit::{is_eos, Input};
+use sonoflow_node_kit::{thread_cpu_ns, Kit};
 use sonoflow_platelet::dynamics::{FillReport, Timings};
 #[cfg(doc)]
 use sonoflow_platelet::suspension::ParticleCarrier;
@@ -239,7 +239,12 @@ impl FluidFeed {
                     snap.vel.push(self.map.vel_to_channel([q.vx as f64, q.vz as f64]));
                 }
                 if !snap.t.is_finite() {
-                    anyhow::bail!("fluid snapshot {} on `{}` has t_valid = {}", snap.frame_id, self.input.topic(), snap.t);
+                    anyhow::bail!(
+                        "fluid snapshot {} on `{}` has t_valid = {}",
+                        snap.frame_id,
+                        self.input.topic(),
+                        snap.t
+                    );
                 }
                 if snap.pos.is_empty() {
                     anyhow::bail!(

@@ -155,7 +155,12 @@ fn platelets_ride_the_sph_tube_at_the_local_poiseuille_speed() {
             assert_eq!(p.kind, PARTICLE_PLATELET);
             let (x, y) = (p.x as f64 - x0, p.z as f64 - z0);
             // in the lumen (f32 positions at 2 cm: ±4 nm)
-            assert!((-1e-8..=8e-3 + 1e-8).contains(&y), "id {} left the lumen: y = {y} at t = {}", p.id, h.common.t_valid);
+            assert!(
+                (-1e-8..=8e-3 + 1e-8).contains(&y),
+                "id {} left the lumen: y = {y} at t = {}",
+                p.id,
+                h.common.t_valid
+            );
             // seeded on the lattice (x ∈ [0, 16] mm), then carried ≤ 0.75 mm downstream
             assert!((0.0..=16.8e-3).contains(&x), "id {} at x = {x}", p.id);
             let i = p.id as usize;
@@ -206,7 +211,8 @@ fn platelets_ride_the_sph_tube_at_the_local_poiseuille_speed() {
         let (i, j) = ((fx as usize).min(gnx - 2), (fz as usize).min(gnz - 2));
         let (sx, sz) = (fx - i as f64, fz - j as f64);
         let at = |ii: usize, jj: usize| f[jj * gnx + ii] as f64;
-        let u = (1.0 - sz) * ((1.0 - sx) * at(i, j) + sx * at(i + 1, j)) + sz * ((1.0 - sx) * at(i, j + 1) + sx * at(i + 1, j + 1));
+        let u = (1.0 - sz) * ((1.0 - sx) * at(i, j) + sx * at(i + 1, j))
+            + sz * ((1.0 - sx) * at(i, j + 1) + sx * at(i + 1, j + 1));
         worst_truth = worst_truth.max((p.vx as f64 - u).abs());
         n_truth += 1;
     }
@@ -266,7 +272,10 @@ fn the_particles_carrier_and_the_particles_input_are_checked_together() {
     assert_ne!(code, Some(0));
     assert!(err.contains("needs the input `particles`"), "{err}");
     // out-of-range fields are named with their range
-    let (code, err) = check("tests/launch/sph-platelets.toml", &["platelets.carrier.kernel_h=-1.0", "platelets.carrier.min_fraction=3.0"]);
+    let (code, err) = check(
+        "tests/launch/sph-platelets.toml",
+        &["platelets.carrier.kernel_h=-1.0", "platelets.carrier.min_fraction=3.0"],
+    );
     assert_ne!(code, Some(0));
     assert!(err.contains("carrier.kernel_h") && err.contains("0 < kernel_h <= 0.1 m"), "{err}");
 }

@@ -382,7 +382,10 @@ impl LatticeField {
         let i = (fx as usize).min(self.nx - 2);
         let j = (fy as usize).min(self.ny - 2);
         let nx = self.nx;
-        self.valid[j * nx + i] && self.valid[j * nx + i + 1] && self.valid[(j + 1) * nx + i] && self.valid[(j + 1) * nx + i + 1]
+        self.valid[j * nx + i]
+            && self.valid[j * nx + i + 1]
+            && self.valid[(j + 1) * nx + i]
+            && self.valid[(j + 1) * nx + i + 1]
     }
 }
 

@@ -235,13 +235,14 @@ impl ParticleInterpolator {
 
     /// Interpolates the particles (positions `pos` \[m\], velocities `vel` \[m/s\], in the
     /// lattice's frame) onto `field`'s nodes and sets its velocities, mask, ω and strain.
-    pub fn fill(&mut self, field: &mut LatticeField, pos: &[[f64; 2]], vel: &[[f64; 2]]) -> Result<FillReport, FlowError> {
+    pub fn fill(
+        &mut self,
+        field: &mut LatticeField,
+        pos: &[[f64; 2]],
+        vel: &[[f64; 2]],
+    ) -> Result<FillReport, FlowError> {
         if pos.len() != vel.len() {
-            return Err(FlowError::Particles(format!(
-                "{} positions but {} velocities",
-                pos.len(),
-                vel.len()
-            )));
+            return Err(FlowError::Particles(format!("{} positions but {} velocities", pos.len(), vel.len())));
         }
         for (b, (p, v)) in pos.iter().zip(vel).enumerate() {
             if !(p[0].is_finite() && p[1].is_finite() && v[0].is_finite() && v[1].is_finite()) {
@@ -357,7 +358,14 @@ impl ParticleInterpolator {
             };
         }
         field.set_velocities_masked(v, valid)?;
-        Ok(FillReport { particles: pos.len(), used, volume, valid_nodes: n_valid, shepard_fallback: fallback, nodes: nn })
+        Ok(FillReport {
+            particles: pos.len(),
+            used,
+            volume,
+            valid_nodes: n_valid,
+            shepard_fallback: fallback,
+            nodes: nn,
+        })
     }
 }
 
@@ -614,7 +622,11 @@ mod tests {
                             assert!(!f.node_valid(i, j) && g == [0.0, 0.0] && phi == 0.0, "outside at y = {}", x[1]);
                         } else if x[1].abs() < a - support {
                             // (the number density of a disordered set fluctuates)
-                            assert!(f.node_valid(i, j) && (phi - 1.0).abs() < 0.25, "inside at y = {}: φ = {phi}", x[1]);
+                            assert!(
+                                f.node_valid(i, j) && (phi - 1.0).abs() < 0.25,
+                                "inside at y = {}: φ = {phi}",
+                                x[1]
+                            );
                             let e = v(x)[0];
                             eu = eu.max((g[0] - e).abs());
                             eb = eb.max((g[0] - e - bias).abs());
@@ -684,15 +696,24 @@ mod tests {
         // particles on one line: the linear fit is singular across it and falls back to Shepard
         let line: Vec<[f64; 2]> = (0..40).map(|k| [-1e-3 + k as f64 * 5e-5, 1e-4]).collect();
         let vel = vec![[0.3, 0.0]; 40];
-        let mut ip = ParticleInterpolator::new(InterpParams { min_fraction: 1e-6, ..params(SphKernel::QuarticSpline, 1e-4, InterpOrder::Linear) }).unwrap();
+        let mut ip = ParticleInterpolator::new(InterpParams {
+            min_fraction: 1e-6,
+            ..params(SphKernel::QuarticSpline, 1e-4, InterpOrder::Linear)
+        })
+        .unwrap();
         let rep = ip.fill(&mut f, &line, &vel).unwrap();
         assert!(rep.valid_nodes > 0 && rep.shepard_fallback == rep.valid_nodes, "{rep:?}");
         let g = f.node_velocity(1, 1).unwrap();
         assert!((g[0] - 0.3).abs() < 1e-15 && g[1] == 0.0, "{g:?}");
         for (h, mf, field) in [(0.0, 0.5, "kernel_h"), (1e-4, 0.0, "min_fraction"), (1e-4, 1.5, "min_fraction")] {
-            let e = ParticleInterpolator::new(InterpParams { kernel: SphKernel::WendlandC2, h, min_fraction: mf, order: InterpOrder::Linear })
-                .unwrap_err()
-                .to_string();
+            let e = ParticleInterpolator::new(InterpParams {
+                kernel: SphKernel::WendlandC2,
+                h,
+                min_fraction: mf,
+                order: InterpOrder::Linear,
+            })
+            .unwrap_err()
+            .to_string();
             assert!(e.contains(&format!("`{field}`")), "{e}");
         }
     }
