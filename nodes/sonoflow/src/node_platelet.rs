@@ -168,19 +168,19 @@ impl FrameMap {
         FrameMap { origin: op.origin, sin, cos }
     }
     /// Channel (x, y) → imaging (x, z).
-    fn to_imaging(&self, p: [f64; 2]) -> [f64; 2] {
+    fn to_imaging(self, p: [f64; 2]) -> [f64; 2] {
         [self.origin[0] + self.cos * p[0] - self.sin * p[1], self.origin[1] + self.sin * p[0] + self.cos * p[1]]
     }
     /// A velocity in channel axes → imaging axes.
-    fn vel_to_imaging(&self, v: [f64; 2]) -> [f64; 2] {
+    fn vel_to_imaging(self, v: [f64; 2]) -> [f64; 2] {
         [self.cos * v[0] - self.sin * v[1], self.sin * v[0] + self.cos * v[1]]
     }
     /// Imaging (x, z) → channel (x, y).
-    fn to_channel(&self, q: [f64; 2]) -> [f64; 2] {
+    fn to_channel(self, q: [f64; 2]) -> [f64; 2] {
         self.vel_to_channel([q[0] - self.origin[0], q[1] - self.origin[1]])
     }
     /// A velocity in imaging axes → channel axes.
-    fn vel_to_channel(&self, v: [f64; 2]) -> [f64; 2] {
+    fn vel_to_channel(self, v: [f64; 2]) -> [f64; 2] {
         [self.cos * v[0] + self.sin * v[1], -self.sin * v[0] + self.cos * v[1]]
     }
 }

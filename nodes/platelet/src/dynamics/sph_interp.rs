@@ -380,7 +380,7 @@ fn linear_fit(s: &Sums) -> Option<[f64; 2]> {
     let c01 = -(mx * myy - mxy * my);
     let c02 = mx * mxy - mxx * my;
     let det = c00 + mx * c01 + my * c02;
-    if !(det >= MIN_MOMENT_DET) {
+    if det.is_nan() || det < MIN_MOMENT_DET {
         return None;
     }
     let a = |b0: f64, b1: f64, b2: f64| (c00 * b0 + c01 * b1 + c02 * b2) / (det * w);
@@ -389,7 +389,8 @@ fn linear_fit(s: &Sums) -> Option<[f64; 2]> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
+    // (index loops read like the matrix algebra of the naive reference)
+    #![allow(clippy::unwrap_used, clippy::needless_range_loop)]
     use super::*;
     use rand::{Rng, SeedableRng};
 
