@@ -4,7 +4,8 @@
 //! ([`shape`]), the coefficient interface of eq 6 ([`coefficients`]), closed forms of spheroids
 //! ([`spheroid`]), a boundary-element Stokes solver for the resolved runs of section 4.3
 //! ([`stokes`]), the training data ([`dataset`]), the 2-D particle dynamics
-//! ([`dynamics`], with the stenosed channel of section 5.2), the networks of sections 4.2–4.4 ([`nn`])
+//! ([`dynamics`], with the stenosed channel of section 5.2 and SPH fluid particles interpolated
+//! onto the particle lattice as the carrier), the networks of sections 4.2–4.4 ([`nn`])
 //! and a ready-to-run suspension built from serde parameters ([`suspension`]).
 
 pub mod coefficients;

@@ -1,4 +1,4 @@
-//! A platelet suspension ready to run (paper 2, Algorithm 2 with an analytic carrier): a carrier
+//! A platelet suspension ready to run (paper 2, Algorithm 2 with an analytic or SPH carrier): a carrier
 //! flow, the particles, the dynamics and the coefficient model, built from plain serde parameters
 //! (the `[params]` of the `platelets` node deserialise into [`SuspensionParams`]).
 //!
@@ -7,11 +7,21 @@
 //! and orientations uniform in [0, 2π), all from one ChaCha8 stream seeded by `seed` (same
 //! suspension on every machine). An explicit list gives each particle's shape (µm) and position.
 //! Every particle starts relaxed: V = v(X), Ω = ω(X) of the carrier at t = 0.
+//!
+//! **Carrier from fluid particles** (`carrier = { type = "particles", … }`, [`ParticleCarrier`];
+//! Algorithm 2 step 2 with an SPH fluid): the carrier is a [`LatticeField`] filled from scattered
+//! fluid particles by [`ParticleInterpolator`] (module `dynamics::sph_interp`: SPH kernel
+//! interpolation, first-order by default, fluid-fraction mask, eq 12 per cell). There is no flow before the first fluid snapshot, so such
+//! a suspension is built by [`Suspension::with_fluid`] (seeding, `{ count }` in the lattice cells
+//! whose four nodes have fluid, and the relaxed start use that snapshot) and each later snapshot
+//! replaces the lattice velocities through [`Suspension::set_fluid`]; [`Suspension::new`]
+//! refuses it. Its time starts at the first snapshot's.
 
 use crate::coefficients::CoefficientModel;
 use crate::dynamics::{
-    CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FlowError, ParticleState, Particles,
-    SimpleShear, Stenosis, Timings, DEFAULT_DENSITY,
+    CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FillReport, FlowError, InterpOrder,
+    InterpParams, LatticeField, ParticleInterpolator, ParticleState, Particles, SimpleShear, SphKernel, Stenosis,
+    Timings, DEFAULT_DENSITY,
 };
 use crate::nn::model::NetworkModel;
 use crate::nn::NnError;
@@ -38,6 +48,136 @@ fn d_v_in() -> f64 {
 }
 fn d_shear_extent() -> f64 {
     1e-3
+}
+fn d_min_fraction() -> f64 {
+    0.4
+}
+
+/// Largest number of lattice nodes of a `particles` carrier.
+pub const MAX_LATTICE_NODES: usize = 4_000_000;
+/// Largest kernel support of a `particles` carrier, in lattice spacings (cost per particle and
+/// snapshot ∝ its square).
+pub const MAX_SUPPORT_SPACINGS: f64 = 64.0;
+
+/// A regular square lattice in channel coordinates: node (i, j) at origin + (i h, j h).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LatticeSpec {
+    /// Position of node (0, 0) \[m\] (channel coordinates).
+    pub origin: [f64; 2],
+    /// Node spacing \[m\].
+    pub h: f64,
+    /// Nodes along x (≥ 2).
+    pub nx: usize,
+    /// Nodes along y (≥ 2).
+    pub ny: usize,
+}
+
+/// The carrier of a suspension in a fluid given as particles (module doc; e.g. the SPH node's
+/// snapshots, mapped into channel coordinates by the caller).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParticleCarrier {
+    /// The lattice the fluid velocity is interpolated onto (Algorithm 2's particle lattice).
+    pub lattice: LatticeSpec,
+    /// SPH smoothing length of the interpolation \[m\] (that of the SPH run, e.g. 1.2 × its
+    /// particle spacing). Required.
+    pub kernel_h: f64,
+    /// Kernel: `quartic-spline` (default, the SPH solver's) or `wendland-c2`.
+    #[serde(default)]
+    pub kernel: SphKernel,
+    /// Lattice nodes with a fluid fraction below this carry no flow (0 < value <= 1). Default 0.4
+    /// (a node on a flat wall has ½; module `dynamics::sph_interp`).
+    #[serde(default = "d_min_fraction")]
+    pub min_fraction: f64,
+    /// Interpolant: `linear` (default; first-order moving least squares, exact for linear
+    /// fields) or `shepard` (normalised kernel sum).
+    #[serde(default)]
+    pub interpolation: InterpOrder,
+    /// Straight walls y = lo and y = hi \[m\] the platelet centres are kept between (reflection,
+    /// as in the analytic channel); absent (default): none (the mask alone stops the flow at
+    /// the lumen's edge).
+    #[serde(default)]
+    pub walls: Option<[f64; 2]>,
+}
+
+impl ParticleCarrier {
+    /// The interpolation's parameters.
+    pub fn interp(&self) -> InterpParams {
+        InterpParams {
+            kernel: self.kernel,
+            h: self.kernel_h,
+            min_fraction: self.min_fraction,
+            order: self.interpolation,
+        }
+    }
+
+    /// Every field in range (errors name `carrier.<field>`).
+    pub fn validate(&self) -> Result<(), SuspensionError> {
+        let l = &self.lattice;
+        for (k, o) in l.origin.iter().enumerate() {
+            if !(o.is_finite() && o.abs() <= 1.0) {
+                return Err(invalid(format!("carrier.lattice.origin[{k}]"), o, "-1 ..= 1 m"));
+            }
+        }
+        if !(l.h.is_finite() && l.h > 0.0 && l.h <= 0.1) {
+            return Err(invalid("carrier.lattice.h", l.h, "0 < h <= 0.1 m"));
+        }
+        if l.nx < 2 || l.ny < 2 || l.nx.saturating_mul(l.ny) > MAX_LATTICE_NODES {
+            return Err(invalid(
+                "carrier.lattice.(nx, ny)",
+                format!("({}, {})", l.nx, l.ny),
+                format!("nx >= 2, ny >= 2, nx * ny <= {MAX_LATTICE_NODES}"),
+            ));
+        }
+        self.interp().validate().map_err(|e| match e {
+            FlowError::Invalid { field, value, allowed } => invalid(format!("carrier.{field}"), value, allowed),
+            e => SuspensionError::Flow(e),
+        })?;
+        let support = self.kernel.support_factor() * self.kernel_h;
+        if support > MAX_SUPPORT_SPACINGS * l.h {
+            return Err(invalid(
+                "carrier.kernel_h",
+                self.kernel_h,
+                format!(
+                    "a kernel support ({} h) of at most {MAX_SUPPORT_SPACINGS} lattice spacings: kernel_h <= {} m with lattice.h = {} m",
+                    self.kernel.support_factor(),
+                    MAX_SUPPORT_SPACINGS * l.h / self.kernel.support_factor(),
+                    l.h
+                ),
+            ));
+        }
+        if let Some([lo, hi]) = self.walls {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(invalid("carrier.walls", format!("[{lo}, {hi}]"), "[lo, hi] with lo < hi (m)"));
+            }
+            let b = self.bbox();
+            if b[2] >= b[3] {
+                return Err(invalid(
+                    "carrier.walls",
+                    format!("[{lo}, {hi}]"),
+                    format!(
+                        "walls overlapping the lattice's y range [{}, {}] m",
+                        l.origin[1],
+                        l.origin[1] + (l.ny - 1) as f64 * l.h
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// x range and y range of the lattice (y clipped to the walls).
+    fn bbox(&self) -> [f64; 4] {
+        let l = &self.lattice;
+        let mut b =
+            [l.origin[0], l.origin[0] + (l.nx - 1) as f64 * l.h, l.origin[1], l.origin[1] + (l.ny - 1) as f64 * l.h];
+        if let Some([lo, hi]) = self.walls {
+            b[2] = b[2].max(lo);
+            b[3] = b[3].min(hi);
+        }
+        b
+    }
 }
 
 /// The carrier flow (tagged by `type`).
@@ -72,6 +212,9 @@ pub enum CarrierParams {
         #[serde(default = "d_shear_extent")]
         height: f64,
     },
+    /// Fluid particles (e.g. SPH) interpolated onto a lattice ([`ParticleCarrier`]; module doc),
+    /// seeded in the lattice cells with fluid (within the walls, if any).
+    Particles(ParticleCarrier),
 }
 
 impl Default for CarrierParams {
@@ -191,6 +334,8 @@ enum Carrier {
     Channel(Channel, f64),
     Stenosis(Stenosis),
     Shear(SimpleShear, f64, f64),
+    /// The lattice (no fluid until the first [`ParticleInterpolator::fill`]) and its interpolator.
+    Particles(Box<(ParticleCarrier, LatticeField, ParticleInterpolator)>),
 }
 
 impl Carrier {
@@ -218,6 +363,13 @@ impl Carrier {
                 extent("height", height)?;
                 Carrier::Shear(SimpleShear::new(rate)?, length, height)
             }
+            CarrierParams::Particles(pc) => {
+                pc.validate()?;
+                let l = &pc.lattice;
+                let field =
+                    LatticeField::new(l.origin, l.h, l.nx, l.ny, vec![[0.0; 2]; l.nx * l.ny])?.with_walls(pc.walls);
+                Carrier::Particles(Box::new((pc, field, ParticleInterpolator::new(pc.interp())?)))
+            }
         })
     }
     fn flow(&self) -> &dyn CarrierFlow {
@@ -225,6 +377,7 @@ impl Carrier {
             Carrier::Channel(c, _) => c,
             Carrier::Stenosis(s) => s,
             Carrier::Shear(s, _, _) => s,
+            Carrier::Particles(b) => &b.1,
         }
     }
     /// x range and y range of the seeding box.
@@ -233,21 +386,62 @@ impl Carrier {
             Carrier::Channel(c, l) => [0.0, *l, 0.0, c.height],
             Carrier::Stenosis(s) => [0.0, s.length, 0.0, s.height],
             Carrier::Shear(_, l, h) => [0.0, *l, 0.0, *h],
+            Carrier::Particles(b) => b.0.bbox(),
         }
     }
-    fn contains(&self, x: [f64; 2]) -> bool {
+    /// Inside the seeding box (and between the local walls): what can be checked without fluid.
+    fn in_box(&self, x: [f64; 2]) -> bool {
         let b = self.bbox();
         match self {
             Carrier::Stenosis(s) => x[0] >= b[0] && x[0] <= b[1] && s.contains(x),
             _ => x[0] >= b[0] && x[0] <= b[1] && x[1] >= b[2] && x[1] <= b[3],
         }
     }
+    /// In the fluid: in the box and, for a `particles` carrier, in a lattice cell with fluid on
+    /// all four nodes.
+    fn contains(&self, x: [f64; 2]) -> bool {
+        match self {
+            Carrier::Particles(b) => self.in_box(x) && b.1.cell_valid_at(x),
+            _ => self.in_box(x),
+        }
+    }
+    /// Lattice cells (of a `particles` carrier) in the seeding box with fluid on all four nodes.
+    fn fluid_cells(&self) -> usize {
+        let Carrier::Particles(b) = self else { return 0 };
+        let f = &b.1;
+        let (nx, ny) = f.dims();
+        let mut n = 0;
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let p = f.node_position(i, j);
+                let c = [p[0] + 0.5 * f.spacing(), p[1] + 0.5 * f.spacing()];
+                n += (self.in_box(c) && f.cell_valid_at(c)) as usize;
+            }
+        }
+        n
+    }
 }
 
 impl SuspensionParams {
     /// Every field in its range, without reading the weights (see [`SuspensionParams::check_weights`]).
     pub fn validate(&self) -> Result<(), SuspensionError> {
-        let carrier = Carrier::new(&self.carrier)?;
+        // (a `particles` carrier is checked without allocating its lattice)
+        let carrier = match &self.carrier {
+            CarrierParams::Particles(pc) => {
+                pc.validate()?;
+                None
+            }
+            other => Some(Carrier::new(other)?),
+        };
+        let bbox = match (&carrier, &self.carrier) {
+            (Some(c), _) => c.bbox(),
+            (None, CarrierParams::Particles(pc)) => pc.bbox(),
+            (None, _) => [f64::NAN; 4],
+        };
+        let in_box = |x: [f64; 2]| match &carrier {
+            Some(c) => c.in_box(x),
+            None => x[0] >= bbox[0] && x[0] <= bbox[1] && x[1] >= bbox[2] && x[1] <= bbox[3],
+        };
         self.dynamics.validate()?;
         Particles::new(self.density, self.radius_factor)?;
         match &self.particles {
@@ -267,8 +461,8 @@ impl SuspensionParams {
                     if !e.phi.is_finite() {
                         return Err(invalid(format!("particles[{i}].phi"), e.phi, "finite (rad)"));
                     }
-                    if !carrier.contains([e.x, e.y]) {
-                        let b = carrier.bbox();
+                    if !in_box([e.x, e.y]) {
+                        let b = bbox;
                         return Err(invalid(
                             format!("particles[{i}].(x, y)"),
                             format!("({}, {})", e.x, e.y),
@@ -324,15 +518,90 @@ pub struct Suspension {
     dynamics: Dynamics,
     carrier: Carrier,
     model: Box<dyn CoefficientModel>,
+    t0: f64,
     t: f64,
     steps: u64,
 }
 
 impl Suspension {
-    /// Validates, loads the model and seeds the particles (module doc).
+    /// Validates, loads the model and seeds the particles (module doc). For an analytic carrier;
+    /// a `particles` carrier needs [`Suspension::with_fluid`].
     pub fn new(p: &SuspensionParams) -> Result<Self, SuspensionError> {
         p.validate()?;
-        let carrier = Carrier::new(&p.carrier)?;
+        if let CarrierParams::Particles(_) = p.carrier {
+            return Err(invalid(
+                "carrier.type",
+                "particles",
+                "an analytic carrier for Suspension::new (a `particles` carrier is built by Suspension::with_fluid from the first fluid snapshot)",
+            ));
+        }
+        Self::build(p, Carrier::new(&p.carrier)?, 0.0)
+    }
+
+    /// A suspension in a `particles` carrier (module doc): the lattice is filled from the fluid
+    /// particles at `pos` \[m\] with velocities `vel` \[m/s\] (channel coordinates) of the
+    /// snapshot at time `t0` \[s\], which becomes the suspension's start time; then the platelets
+    /// are seeded in the lattice cells with fluid and relaxed to that flow. An explicit particle
+    /// outside those cells is refused.
+    pub fn with_fluid(
+        p: &SuspensionParams,
+        t0: f64,
+        pos: &[[f64; 2]],
+        vel: &[[f64; 2]],
+    ) -> Result<(Self, FillReport), SuspensionError> {
+        p.validate()?;
+        if !t0.is_finite() {
+            return Err(invalid("t0", t0, "finite (s)"));
+        }
+        let mut carrier = Carrier::new(&p.carrier)?;
+        let Carrier::Particles(b) = &mut carrier else {
+            return Err(invalid("carrier.type", "an analytic carrier", "`particles` for Suspension::with_fluid"));
+        };
+        let (_, field, interp) = &mut **b;
+        let report = interp.fill(field, pos, vel)?;
+        if carrier.fluid_cells() == 0 {
+            return Err(invalid(
+                "carrier.lattice",
+                format!(
+                    "{} of {} nodes with fluid ({} of {} particles within reach)",
+                    report.valid_nodes, report.nodes, report.used, report.particles
+                ),
+                "a lattice (within the walls) with at least one cell whose four nodes have a fluid fraction >= min_fraction: place it over the fluid",
+            ));
+        }
+        if let ParticlesSpec::List(list) = &p.particles {
+            for (i, e) in list.iter().enumerate() {
+                if !carrier.contains([e.x, e.y]) {
+                    return Err(invalid(
+                        format!("particles[{i}].(x, y)"),
+                        format!("({}, {})", e.x, e.y),
+                        "in a lattice cell whose four nodes have fluid (fraction >= carrier.min_fraction) in the first fluid snapshot",
+                    ));
+                }
+            }
+        }
+        Ok((Self::build(p, carrier, t0)?, report))
+    }
+
+    /// Replaces the fluid of a `particles` carrier with a new snapshot (same frame and units as
+    /// in [`Suspension::with_fluid`]); the next macro step uses it.
+    pub fn set_fluid(&mut self, pos: &[[f64; 2]], vel: &[[f64; 2]]) -> Result<FillReport, SuspensionError> {
+        let Carrier::Particles(b) = &mut self.carrier else {
+            return Err(invalid("carrier.type", "an analytic carrier", "`particles` for set_fluid"));
+        };
+        let (_, field, interp) = &mut **b;
+        Ok(interp.fill(field, pos, vel)?)
+    }
+
+    /// The lattice of a `particles` carrier.
+    pub fn lattice(&self) -> Option<&LatticeField> {
+        match &self.carrier {
+            Carrier::Particles(b) => Some(&b.1),
+            _ => None,
+        }
+    }
+
+    fn build(p: &SuspensionParams, carrier: Carrier, t0: f64) -> Result<Self, SuspensionError> {
         let model: Box<dyn CoefficientModel> = match p.model {
             ModelKind::Standin => Box::new(DiscStandIn::default()),
             ModelKind::Network => {
@@ -346,7 +615,7 @@ impl Suspension {
         particles.reserve(p.count());
         let flow = carrier.flow();
         let push = |ps: &mut Particles, shape: Shape, x: [f64; 2], phi: f64| -> Result<(), SuspensionError> {
-            let f = flow.sample(x, 0.0);
+            let f = flow.sample(x, t0);
             ps.push(shape, ParticleState { x, phi, v: f.v, omega: f.omega })?;
             Ok(())
         };
@@ -355,12 +624,26 @@ impl Suspension {
                 let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(p.seed);
                 let sampler = ShapeSampler::default();
                 let b = carrier.bbox();
+                // a `particles` carrier may have fluid in few cells of its box: bounded rejection
+                let max_tries = match carrier {
+                    Carrier::Particles(_) => 1000 * (*count as u64) + 1_000_000,
+                    _ => u64::MAX,
+                };
+                let mut tries = 0u64;
                 for _ in 0..*count {
                     let shape = sampler.sample(&mut rng);
                     let x = loop {
                         let x = [rng.gen_range(b[0]..b[1]), rng.gen_range(b[2]..b[3])];
                         if carrier.contains(x) {
                             break x;
+                        }
+                        tries += 1;
+                        if tries > max_tries {
+                            return Err(invalid(
+                                "carrier.lattice",
+                                format!("{} fluid cells", carrier.fluid_cells()),
+                                "fluid over more of the lattice (no seeding position found in 1000 tries per particle)",
+                            ));
                         }
                     };
                     let phi = rng.gen_range(0.0..std::f64::consts::TAU);
@@ -374,16 +657,20 @@ impl Suspension {
                 }
             }
         }
-        Ok(Suspension { particles, dynamics: Dynamics::new(p.dynamics)?, carrier, model, t: 0.0, steps: 0 })
+        Ok(Suspension { particles, dynamics: Dynamics::new(p.dynamics)?, carrier, model, t0, t: t0, steps: 0 })
     }
 
     /// One macro step (M sub-steps); returns the time split.
     pub fn macro_step(&mut self) -> Result<Timings, DynamicsError> {
         let tm = self.dynamics.macro_step(&mut self.particles, self.carrier.flow(), self.model.as_ref(), self.t)?;
         self.steps += 1;
-        let k = self.dynamics.params().sub_step * self.dynamics.params().sub_steps as f64;
-        self.t = self.steps as f64 * k;
+        self.t = self.t0 + self.steps as f64 * self.macro_step_length();
         Ok(tm)
+    }
+
+    /// Length of a macro step k = sub_step · sub_steps \[s\].
+    pub fn macro_step_length(&self) -> f64 {
+        self.dynamics.params().sub_step * self.dynamics.params().sub_steps as f64
     }
 
     /// Time of the current state \[s\].
@@ -459,6 +746,146 @@ mod tests {
         let e = parse(r#"{"weights": "/nonexistent"}"#).unwrap().check_weights().unwrap_err().to_string();
         assert!(e.contains("`weights`") && e.contains("n.safetensors"), "{e}");
         SuspensionParams::default().check_weights().unwrap();
+    }
+
+    /// Plane Poiseuille flow between y = 0 and y = 2a (peak u_max on y = a) as SPH-like particles
+    /// on a jittered lattice of spacing dx, x ∈ [0, 12 mm].
+    fn poiseuille_cloud(u_max: f64, a: f64, dx: f64, scale: f64) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut pos, mut vel) = (Vec::new(), Vec::new());
+        for j in 0..(2.0 * a / dx).round() as usize {
+            for i in 0..(12e-3 / dx).round() as usize {
+                let x = (i as f64 + 0.5 + 0.2 * rng.gen_range(-1.0..1.0)) * dx;
+                let y = ((j as f64 + 0.5 + 0.2 * rng.gen_range(-1.0..1.0)) * dx).clamp(0.0, 2.0 * a);
+                pos.push([x, y]);
+                vel.push([scale * u_max * (1.0 - ((y - a) / a).powi(2)), 0.0]);
+            }
+        }
+        (pos, vel)
+    }
+
+    fn particle_carrier_params(count: usize) -> SuspensionParams {
+        parse(&format!(
+            r#"{{"carrier": {{"type": "particles", "lattice": {{"origin": [2e-3, -0.5e-3], "h": 1e-4, "nx": 61, "ny": 91}},
+                "kernel_h": 4.8e-4, "walls": [0.0, 8e-3]}},
+              "particles": {{"count": {count}}}, "model": "standin",
+              "dynamics": {{"sub_step": 2.5e-5, "sub_steps": 20}}}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn particle_carrier_parses_and_names_bad_fields() {
+        let p = particle_carrier_params(10);
+        let CarrierParams::Particles(pc) = p.carrier else { panic!("{:?}", p.carrier) };
+        assert_eq!((pc.kernel, pc.min_fraction, pc.walls), (SphKernel::QuarticSpline, 0.4, Some([0.0, 8e-3])));
+        p.validate().unwrap();
+        let with = |patch: &str| {
+            let base = r#""type": "particles", "lattice": {"origin": [0, 0], "h": 1e-4, "nx": 11, "ny": 11}"#;
+            parse(&format!(r#"{{"carrier": {{{base}, {patch}}}}}"#))
+                .and_then(|p| p.validate().map_err(|e| e.to_string()))
+        };
+        with(r#""kernel_h": 2e-4"#).unwrap();
+        for (patch, want) in [
+            (r#""kernel_h": 0.0"#, "`carrier.kernel_h` = 0 is invalid: allowed 0 < kernel_h <= 0.1 m"),
+            (r#""kernel_h": 1.0"#, "`carrier.kernel_h`"),
+            (r#""kernel_h": 2e-4, "min_fraction": 2"#, "`carrier.min_fraction` = 2"),
+            (r#""kernel_h": 2e-4, "walls": [3e-3, 1e-3]"#, "`carrier.walls`"),
+            (r#""kernel_h": 2e-4, "walls": [3e-3, 4e-3]"#, "overlapping the lattice's y range"),
+            (r#""kernel_h": 2e-4, "kernel": "gauss""#, "gauss"),
+            (r#""kernel_h": 2e-4, "kernal": "wendland-c2""#, "kernal"),
+            (r#""walls": [0, 1e-3]"#, "missing field `kernel_h`"),
+        ] {
+            let e = with(patch).unwrap_err();
+            assert!(e.contains(want), "{patch}: {e}");
+        }
+        // support 2.5 × 0.03 m > 64 lattice spacings of 0.1 mm
+        let e = with(r#""kernel_h": 0.03"#).unwrap_err();
+        assert!(e.contains("`carrier.kernel_h`") && e.contains("64 lattice spacings"), "{e}");
+        let e = parse(r#"{"carrier": {"type": "particles", "lattice": {"origin": [0, 0], "h": 1e-4, "nx": 1, "ny": 11}, "kernel_h": 2e-4}}"#)
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("carrier.lattice.(nx, ny)") && e.contains("nx >= 2"), "{e}");
+        // no fluid yet: only with_fluid builds it
+        let e = Suspension::new(&particle_carrier_params(10)).err().unwrap().to_string();
+        assert!(e.contains("with_fluid"), "{e}");
+    }
+
+    /// The suspension in a `particles` carrier: seeded in the lattice cells with fluid, relaxed to
+    /// the interpolated flow, carried at the Poiseuille speed (minus the kernel's smoothing bias
+    /// u_max M₂/(2a²) = 0.6 % with h = 0.48 mm, a = 4 mm; module `dynamics::sph_interp`), and a new
+    /// snapshot takes effect at the next macro step.
+    #[test]
+    fn platelets_ride_a_fluid_given_as_particles() {
+        let (u_max, a) = (0.075, 4e-3);
+        let p = particle_carrier_params(300);
+        let (pos, vel) = poiseuille_cloud(u_max, a, 0.4e-3, 1.0);
+        let (mut s, rep) = Suspension::with_fluid(&p, 0.25, &pos, &vel).unwrap();
+        assert_eq!(s.time(), 0.25);
+        // the lattice reaches 0.5 mm outside each wall: those nodes (φ < ½) are masked
+        assert!(rep.valid_nodes < rep.nodes && rep.valid_nodes > rep.nodes * 3 / 4, "{rep:?}");
+        let lat = s.lattice().unwrap();
+        let ps = &s.particles;
+        assert_eq!(ps.len(), 300);
+        for i in 0..ps.len() {
+            let x = [ps.x[i], ps.y[i]];
+            assert!(lat.cell_valid_at(x) && (0.0..=8e-3).contains(&x[1]), "seeded at {x:?}");
+            assert_eq!([ps.vx[i], ps.vy[i]], lat.velocity(x, 0.25), "relaxed");
+        }
+        let x0: Vec<[f64; 2]> = (0..300).map(|i| [ps.x[i], ps.y[i]]).collect();
+        s.macro_step().unwrap();
+        assert!((s.time() - 0.2505).abs() < 1e-15, "{}", s.time());
+        let k = s.macro_step_length();
+        let bias = u_max * 0.79939 * 0.48e-3f64.powi(2) / (2.0 * a * a);
+        let (mut worst, mut n_axis) = (0.0f64, 0);
+        for i in 0..300 {
+            let id = s.particles.id[i] as usize;
+            let (x, y) = (s.particles.x[i], s.particles.y[i]);
+            assert!((0.0..=8e-3).contains(&y), "left the channel: y = {y}");
+            // away from the walls (a kernel support): speed = profile − bias, within the jitter term
+            let yc = 0.5 * (y + x0[id][1]);
+            if (yc - a).abs() < a - 1.2e-3 {
+                let u = u_max * (1.0 - ((yc - a) / a).powi(2)) - bias;
+                worst = worst.max(((x - x0[id][0]) / k - u).abs() / u_max);
+                assert!((y - x0[id][1]).abs() < 0.005 * u_max * k, "id {id}: dy = {}", y - x0[id][1]);
+                n_axis += 1;
+            }
+        }
+        eprintln!(
+            "particles carrier: {n_axis} platelets away from the walls, worst |dx/k − (u − bias)| = {:.3} % of u_max",
+            100.0 * worst
+        );
+        assert!(n_axis > 100 && worst < 0.005, "{n_axis}, {worst}");
+        // a new snapshot with twice the speed takes effect in the next step
+        let (pos2, vel2) = poiseuille_cloud(u_max, a, 0.4e-3, 2.0);
+        s.set_fluid(&pos2, &vel2).unwrap();
+        let before: Vec<f64> = s.particles.x.clone();
+        let yb: Vec<f64> = s.particles.y.clone();
+        s.macro_step().unwrap();
+        for i in 0..300 {
+            if (yb[i] - a).abs() < a - 1.2e-3 {
+                let u = 2.0 * (u_max * (1.0 - ((yb[i] - a) / a).powi(2)) - bias);
+                assert!(((s.particles.x[i] - before[i]) / k - u).abs() < 0.01 * u_max, "id {}", s.particles.id[i]);
+            }
+        }
+        // an analytic suspension has no fluid to set
+        let mut an = Suspension::new(&SuspensionParams {
+            model: ModelKind::Standin,
+            particles: ParticlesSpec::Count { count: 2 },
+            ..Default::default()
+        })
+        .unwrap();
+        assert!(an.set_fluid(&pos, &vel).is_err());
+        // a lattice beside the fluid has nothing to seed into
+        let mut far = particle_carrier_params(3);
+        if let CarrierParams::Particles(pc) = &mut far.carrier {
+            pc.lattice.origin = [0.5, 0.5];
+            pc.walls = None;
+        }
+        let e = Suspension::with_fluid(&far, 0.0, &pos, &vel).err().unwrap().to_string();
+        assert!(e.contains("carrier.lattice") && e.contains("place it over the fluid"), "{e}");
     }
 
     #[test]

@@ -87,8 +87,8 @@ static KINDS: &[KindSpec] = &[
     },
     KindSpec {
         name: "platelets",
-        about: "platelet suspension (paper 2, Algorithm 2: point particles with shape, trained coefficient networks) in an analytic carrier (straight or stenosed channel, shear): platelet snapshots every few macro steps, with the time split advection / collisions / coefficients",
-        ports: &[port("particles", Out, ParticleSnapshotV1, true)],
+        about: "platelet suspension (paper 2, Algorithm 2: point particles with shape, trained coefficient networks) in an analytic carrier (straight or stenosed channel, shear) or in fluid snapshots on the input `particles` (SPH, interpolated onto a lattice; carrier type \"particles\"): platelet snapshots every few macro steps, with the time split advection / collisions / coefficients",
+        ports: &[port("particles", In, ParticleSnapshotV1, false), port("particles", Out, ParticleSnapshotV1, true)],
         dynamic_inputs: false,
         dynamic_outputs: false,
         validate: crate::node_platelet::validate,
@@ -230,6 +230,15 @@ pub fn names() -> Vec<&'static str> {
 /// All kinds.
 pub fn all() -> &'static [KindSpec] {
     KINDS
+}
+
+/// Checks between a node's parameters and its wiring that `validate` (params only) cannot make:
+/// for `platelets`, the carrier `particles` goes with the input `particles`.
+pub fn check_wiring(kind: &str, params: &serde_json::Value, inputs: &[&str]) -> Result<(), String> {
+    match kind {
+        "platelets" => crate::node_platelet::check_wiring(params, inputs.contains(&"particles")),
+        _ => Ok(()),
+    }
 }
 
 /// Deserialises params (`null` = empty table) into `P`.

@@ -397,6 +397,10 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
                 if let Err(e) = (spec.validate)(&params) {
                     errors.push(format!("nodes.{name}.params: {e}"));
                 }
+                let wired: Vec<&str> = inputs.keys().map(String::as_str).collect();
+                if let Err(e) = kinds::check_wiring(spec.name, &params, &wired) {
+                    errors.push(format!("node `{name}` ({}): {e}", spec.name));
+                }
                 if spec.dynamic_inputs {
                     // Recorder: inputs derived from params.topics.
                     if !inputs.is_empty() {

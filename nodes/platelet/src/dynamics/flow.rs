@@ -14,7 +14,10 @@
 //!   unit tangent at node i of the circle through the four nodes; the strain from the same cell
 //!   (gradient of the bilinear interpolant at the cell centre). Both are exact for linear fields
 //!   (eq 12 equals ½ curl of the bilinear interpolant at the cell centre). Points outside the
-//!   lattice are clamped onto it.
+//!   lattice are clamped onto it. Nodes carry a validity mask (all valid unless set with
+//!   [`LatticeField::set_velocities_masked`]); an invalid node (no fluid there, e.g. outside the
+//!   lumen of an SPH carrier) must carry v = 0, so the interpolant falls to zero across the last
+//!   cell like a no-slip wall. [`super::sph_interp`] fills a lattice from scattered SPH particles.
 //! - [`super::Stenosis`] (module `stenosis`): section 5.2's channel with a 25 % narrowing, from the
 //!   lubrication approximation; its walls vary along x ([`CarrierFlow::local_walls`]).
 
@@ -99,6 +102,9 @@ pub enum FlowError {
     /// Lattice data of the wrong size.
     #[error("lattice field: {nx} x {ny} nodes need {expected} velocities, got {got}")]
     Size { nx: usize, ny: usize, expected: usize, got: usize },
+    /// Scattered particle data that cannot be used (lengths, NaN).
+    #[error("fluid particles: {0}")]
+    Particles(String),
 }
 
 pub(crate) fn check(field: &'static str, value: f64, ok: bool, allowed: &'static str) -> Result<(), FlowError> {
@@ -203,6 +209,7 @@ pub struct LatticeField {
     nx: usize,
     ny: usize,
     v: Vec<[f64; 2]>,
+    valid: Vec<bool>,
     cell_omega: Vec<f64>,
     cell_strain: Vec<[f64; 3]>,
     walls: Option<[f64; 2]>,
@@ -226,6 +233,7 @@ impl LatticeField {
             nx,
             ny,
             v: Vec::new(),
+            valid: Vec::new(),
             cell_omega: vec![0.0; (nx - 1) * (ny - 1)],
             cell_strain: vec![[0.0; 3]; (nx - 1) * (ny - 1)],
             walls: None,
@@ -262,11 +270,23 @@ impl LatticeField {
         self
     }
 
-    /// New node velocities (same lattice); recomputes ω and the strain of every cell.
+    /// New node velocities (same lattice), every node valid; recomputes ω and the strain of every
+    /// cell.
     pub fn set_velocities(&mut self, v: Vec<[f64; 2]>) -> Result<(), FlowError> {
+        let n = v.len();
+        self.set_velocities_masked(v, vec![true; n])
+    }
+
+    /// New node velocities and validity mask (same lattice, both row-major); recomputes ω and the
+    /// strain of every cell. Invalid nodes should carry v = 0 (module doc); their velocities are
+    /// used as given.
+    pub fn set_velocities_masked(&mut self, v: Vec<[f64; 2]>, valid: Vec<bool>) -> Result<(), FlowError> {
         let (nx, ny) = (self.nx, self.ny);
         if v.len() != nx * ny {
             return Err(FlowError::Size { nx, ny, expected: nx * ny, got: v.len() });
+        }
+        if valid.len() != nx * ny {
+            return Err(FlowError::Size { nx, ny, expected: nx * ny, got: valid.len() });
         }
         for (k, vk) in v.iter().enumerate() {
             for c in vk {
@@ -276,6 +296,7 @@ impl LatticeField {
             }
         }
         self.v = v;
+        self.valid = valid;
         let h = self.h;
         let d_t = std::f64::consts::SQRT_2 * h;
         // nodes counter-clockwise from the lower left, offsets from the cell centre (units of h/2)
@@ -309,6 +330,62 @@ impl LatticeField {
     /// ω of cell (i, j) from eq 12.
     pub fn cell_omega(&self, i: usize, j: usize) -> Option<f64> {
         (i + 1 < self.nx && j + 1 < self.ny).then(|| self.cell_omega[j * (self.nx - 1) + i])
+    }
+
+    /// Strain rate (E_xx, E_xy, E_yy) of cell (i, j).
+    pub fn cell_strain(&self, i: usize, j: usize) -> Option<[f64; 3]> {
+        (i + 1 < self.nx && j + 1 < self.ny).then(|| self.cell_strain[j * (self.nx - 1) + i])
+    }
+
+    /// Position of node (0, 0) \[m\].
+    pub fn origin(&self) -> [f64; 2] {
+        self.origin
+    }
+
+    /// Node spacing h \[m\].
+    pub fn spacing(&self) -> f64 {
+        self.h
+    }
+
+    /// Nodes along x and y.
+    pub fn dims(&self) -> (usize, usize) {
+        (self.nx, self.ny)
+    }
+
+    /// Position of node (i, j) \[m\].
+    pub fn node_position(&self, i: usize, j: usize) -> [f64; 2] {
+        [self.origin[0] + i as f64 * self.h, self.origin[1] + j as f64 * self.h]
+    }
+
+    /// Velocity of node (i, j) \[m/s\].
+    pub fn node_velocity(&self, i: usize, j: usize) -> Option<[f64; 2]> {
+        (i < self.nx && j < self.ny).then(|| self.v[j * self.nx + i])
+    }
+
+    /// Whether node (i, j) is valid (has fluid; module doc).
+    pub fn node_valid(&self, i: usize, j: usize) -> bool {
+        i < self.nx && j < self.ny && self.valid[j * self.nx + i]
+    }
+
+    /// Number of valid nodes.
+    pub fn valid_nodes(&self) -> usize {
+        self.valid.iter().filter(|&&b| b).count()
+    }
+
+    /// Whether `x` lies on the lattice (not clamped) in a cell whose four nodes are valid.
+    pub fn cell_valid_at(&self, x: [f64; 2]) -> bool {
+        let fx = (x[0] - self.origin[0]) / self.h;
+        let fy = (x[1] - self.origin[1]) / self.h;
+        if !(fx >= 0.0 && fy >= 0.0 && fx <= (self.nx - 1) as f64 && fy <= (self.ny - 1) as f64) {
+            return false;
+        }
+        let i = (fx as usize).min(self.nx - 2);
+        let j = (fy as usize).min(self.ny - 2);
+        let nx = self.nx;
+        self.valid[j * nx + i]
+            && self.valid[j * nx + i + 1]
+            && self.valid[(j + 1) * nx + i]
+            && self.valid[(j + 1) * nx + i + 1]
     }
 }
 

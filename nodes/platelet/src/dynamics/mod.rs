@@ -44,12 +44,14 @@ pub mod collide;
 pub mod flow;
 pub mod integrate;
 pub mod particles;
+pub mod sph_interp;
 pub mod standin;
 pub mod stenosis;
 
 pub use collide::CellGrid;
 pub use flow::{CarrierFlow, Channel, FlowError, FlowSample, LatticeField, LocalWalls, SimpleShear};
 pub use particles::{ParticleState, Particles, DEFAULT_DENSITY};
+pub use sph_interp::{FillReport, InterpOrder, InterpParams, ParticleInterpolator, SphKernel};
 pub use standin::DiscStandIn;
 pub use stenosis::Stenosis;
 
