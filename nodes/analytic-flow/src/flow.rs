@@ -363,6 +363,35 @@ mod tests {
         assert!((f.area_m2() - std::f64::consts::PI * 1e-4).abs() < 1e-18);
     }
 
+    /// The plug band translates rigidly: the same velocity everywhere inside (walls included),
+    /// none outside, every particle displaced by v·t (modulo the period along the axis), and
+    /// bad values rejected with the field's name.
+    #[test]
+    fn plug_band_translates_rigidly() {
+        let f = FlowKind::Plug { center_x: 0.0, center_z: 0.02, angle_deg: 30.0, width: 0.01, v: 0.3, length: 0.04 };
+        let (s, c) = 30f64.to_radians().sin_cos();
+        for (along, across) in [(0.0, 0.0), (0.01, 0.0049), (-0.019, -0.005), (0.0, 0.004)] {
+            let (x, z) = (along * c - across * s, 0.02 + along * s + across * c);
+            let (vx, vz) = f.velocity(x, z).expect("inside");
+            assert!((vx - 0.3 * c).abs() < 1e-15 && (vz - 0.3 * s).abs() < 1e-15, "({along}, {across})");
+        }
+        assert!(f.velocity(-0.0051 * s, 0.02 + 0.0051 * c).is_none(), "just outside the band");
+        let g = Geometry::from_kind(&f);
+        for (a, b) in [(0.0, 0.0), (-0.015, 0.004), (0.019, -0.0049)] {
+            let (s0, s1) = (g.state(a, b, 0.0), g.state(a, b, 0.01));
+            let d = ((s1.x - s0.x).powi(2) + (s1.z - s0.z).powi(2)).sqrt();
+            // 3 mm along the axis unless the particle wrapped around the 40 mm period
+            assert!((d - 0.003).abs() < 1e-12 || (d - 0.037).abs() < 1e-12, "displacement {d}");
+            assert_eq!((s1.vx, s1.vz), (s0.vx, s0.vz));
+        }
+        let bad = FlowKind::Plug { center_x: 0.0, center_z: 0.02, angle_deg: 0.0, width: 0.0, v: 0.3, length: 0.04 };
+        assert!(bad.validate().unwrap_err().to_string().contains("flow.width"));
+        let bad = FlowKind::Plug { center_x: 0.0, center_z: 0.02, angle_deg: 0.0, width: 0.01, v: 1e3, length: 0.04 };
+        assert!(bad.validate().unwrap_err().to_string().contains("flow.v"));
+        let json = serde_json::to_string(&f).expect("serialize");
+        assert!(json.contains("\"type\":\"plug\""), "{json}");
+    }
+
     #[test]
     fn serde_round_trip_and_tags() {
         let disk = FlowKind::RotatingDisk { center_x: 0.0, center_z: 0.03, radius: 0.01, omega: 6.0 };

@@ -19,6 +19,9 @@
 //!   `(cos θ, sin θ)` in (x, z) with θ = `angle_deg`; a positive angle tilts
 //!   the axis towards +z (the vessel is deeper at +x). `v_max` is signed,
 //!   positive along that direction. Profile `u(r) = v_max (1 - (2r/D)^2)`.
+//! - **Plug band**: [`FlowKind::Plug`] has the vessel's axis convention and a
+//!   uniform velocity `v` across its `width`: a rigid translation, the phantom
+//!   that measures the imaging chain's Doppler gain without flow gradients.
 //! - **Rotation sign**: [`FlowKind::RotatingDisk`] has
 //!   `v = omega * (-(z - zc), x - xc)`: positive `omega` turns +x towards +z,
 //!   which looks **clockwise** on an image (z down).

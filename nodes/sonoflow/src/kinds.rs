@@ -65,7 +65,7 @@ use PortDir::*;
 static KINDS: &[KindSpec] = &[
     KindSpec {
         name: "analytic-flow",
-        about: "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk) at the acquisition times, plus the exact field as ground truth",
+        about: "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk, plug band) at the acquisition times, plus the exact field as ground truth",
         ports: &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
         dynamic_inputs: false,
         dynamic_outputs: false,
