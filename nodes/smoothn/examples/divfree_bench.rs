@@ -39,7 +39,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let k: Vec<usize> = (0..n).filter(|&p| m[p] > 0.0).collect();
         (k.iter().map(|&p| (a[p] - b[p]).powi(2)).sum::<f64>() / k.len() as f64).sqrt()
     };
-    println!("Divergence-free regulariser, {nz} × {nx} pixels ({} inside), threads: rayon default", m.iter().filter(|v| **v > 0.0).count());
+    println!(
+        "Divergence-free regulariser, {nz} × {nx} pixels ({} inside), threads: rayon default",
+        m.iter().filter(|v| **v > 0.0).count()
+    );
     println!();
     println!("| step | time (s) | factorisations | S | RMS error x / z (m/s) |");
     println!("|---|---:|---:|---:|---|");
@@ -60,9 +63,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         Ok(r.s)
     };
-    run("given S = 3, not robust (one factorisation + trace probes)", &DivFreeParams { s: Some(3.0), robust: false, ..Default::default() }, None)?;
-    let s_cv = run("block-CV S from a cold start (S = 10), not robust", &DivFreeParams { robust: false, ..Default::default() }, None)?;
-    run("block-CV S warm-started at the chosen S, not robust", &DivFreeParams { robust: false, ..Default::default() }, Some(s_cv))?;
+    run(
+        "given S = 3, not robust (one factorisation + trace probes)",
+        &DivFreeParams { s: Some(3.0), robust: false, ..Default::default() },
+        None,
+    )?;
+    let s_cv = run(
+        "block-CV S from a cold start (S = 10), not robust",
+        &DivFreeParams { robust: false, ..Default::default() },
+        None,
+    )?;
+    run(
+        "block-CV S warm-started at the chosen S, not robust",
+        &DivFreeParams { robust: false, ..Default::default() },
+        Some(s_cv),
+    )?;
     run("block-CV S, robust (3 passes), cold start: the node's default", &DivFreeParams::default(), None)?;
     run("block-CV S, robust, warm start (the node's later frames)", &DivFreeParams::default(), Some(s_cv))?;
     let mut data = ux.clone();
