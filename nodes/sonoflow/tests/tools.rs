@@ -100,6 +100,38 @@ fn smoothn_tool_fixed_s_scalar_field_with_weights() {
     assert_eq!(report.s, 3.5);
 }
 
+/// `--divergence-free`: the tool writes exactly the library's stream-function fit, which is
+/// divergence-free to round-off; a field that is not (2, nz, nx) is refused.
+#[test]
+fn smoothn_tool_divergence_free_matches_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, noisy) = noisy_field();
+    let (inp, out) = (dir.path().join("field.npy"), dir.path().join("df.npy"));
+    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    let args = ["--in", inp.to_str().unwrap(), "--divergence-free", "--order", "3", "--robust"];
+    let (code, stdout, stderr) =
+        smoothn_cli(&[&args[..], &["--spacing", "2e-4,2e-4", "--out", out.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("divergence-free fit on [30, 40]") && stdout.contains("block CV"), "{stdout}");
+    let got = npy::read(&out).unwrap();
+    assert_eq!(got.shape, vec![2, 30, 40]);
+    let f = sonoflow_smoothn::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
+    let (mut vx, mut vz) = (vec![0.0; 1200], vec![0.0; 1200]);
+    let p = sonoflow_smoothn::DivFreeParams::default();
+    let report = f.fit(&noisy[..1200], &noisy[1200..], None, &p, &mut vx, &mut vz).unwrap();
+    assert!(got.data[..1200] == vx[..] && got.data[1200..] == vz[..], "tool output differs from the library");
+    assert!(report.max_divergence < 1e-12);
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sonoflow::tool_smoothn::sidecar(&out)).unwrap()).unwrap();
+    assert_eq!(side["report"]["s"].as_f64().unwrap(), report.s);
+    let bad = dir.path().join("bad.npy");
+    npy::write_f64(&bad, &[3, 10, 40], &noisy[..1200]).unwrap();
+    let (code, _, stderr) =
+        smoothn_cli(&["--in", bad.to_str().unwrap(), "--divergence-free", "--out", out.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("(2, nz, nx)"), "{stderr}");
+}
+
 #[test]
 fn smoothn_tool_rejects_bad_input_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
