@@ -142,6 +142,22 @@ pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse::<RegulariserParams>(v)?.check()
 }
 
+/// The output of a frame with no usable data: zero velocities, no S, not converged.
+fn nothing_measured(
+    mut oh: VectorFieldHeaderV1,
+    planes_out: &mut [f32],
+    velocity_planes: [usize; 2],
+    n: usize,
+) -> VectorFieldHeaderV1 {
+    for i in velocity_planes {
+        planes_out[i * n..(i + 1) * n].fill(0.0);
+    }
+    oh.smoothing_s = 0.0;
+    oh.outlier_fraction = 0.0;
+    oh.converged = 0;
+    oh
+}
+
 /// Where a plane id sits in a header's plane list.
 fn find_plane(ids: &[u32], id: u32) -> Option<usize> {
     ids.iter().position(|&p| p == id)
@@ -233,12 +249,7 @@ impl Regulariser {
         oh.source = VECTOR_REGULARISED;
         if !(any_weight && valid) {
             // Nothing measured (e.g. an empty mask or every pixel flagged): zero velocities, no S.
-            planes_out[ivx * n..(ivx + 1) * n].fill(0.0);
-            planes_out[ivz * n..(ivz + 1) * n].fill(0.0);
-            oh.smoothing_s = 0.0;
-            oh.outlier_fraction = 0.0;
-            oh.converged = 0;
-            return Ok(oh);
+            return Ok(nothing_measured(oh, planes_out, [ivx, ivz], n));
         }
         let shape = [nz, nx];
         if self.params.method == Method::DivergenceFree {
@@ -309,14 +320,7 @@ impl Regulariser {
         let (mut vx, mut vz) = (vec![0.0; n], vec![0.0; n]);
         let report = match df.fit_warm(ux, uz, Some(&self.weights), dp, self.last_s, &mut vx, &mut vz) {
             Ok(r) => r,
-            Err(sonoflow_smoothn::DivFreeError::NoData) => {
-                planes_out[ivx * n..(ivx + 1) * n].fill(0.0);
-                planes_out[ivz * n..(ivz + 1) * n].fill(0.0);
-                oh.smoothing_s = 0.0;
-                oh.outlier_fraction = 0.0;
-                oh.converged = 0;
-                return Ok(oh);
-            }
+            Err(sonoflow_smoothn::DivFreeError::NoData) => return Ok(nothing_measured(oh, planes_out, [ivx, ivz], n)),
             Err(e) => return Err(e.into()),
         };
         self.last_s = Some(report.s);

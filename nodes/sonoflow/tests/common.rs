@@ -153,3 +153,12 @@ pub fn checked_figures(run: &Path) -> Vec<String> {
     }
     names
 }
+
+/// The raw payloads of every message on `topic` of a recording, in log order.
+pub fn read_topic(path: &Path, topic: &str) -> Vec<Vec<u8>> {
+    let r = sonoflow_mcap_io::McapReader::open(path).unwrap();
+    r.messages(&sonoflow_mcap_io::ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
+        .unwrap()
+        .map(|m| m.unwrap().data)
+        .collect()
+}

@@ -8,14 +8,6 @@ use sonoflow_mcap_io::{McapReader, ReadOptions};
 use sonoflow_messages::cdr;
 use sonoflow_messages::kinds::{ParticleSnapshot, RfFrame, VectorField};
 
-fn read_topic(path: &std::path::Path, topic: &str) -> Vec<Vec<u8>> {
-    let r = McapReader::open(path).unwrap();
-    r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap().data)
-        .collect()
-}
-
 fn stats(path: &std::path::Path) -> std::collections::BTreeMap<String, String> {
     McapReader::open(path)
         .unwrap()

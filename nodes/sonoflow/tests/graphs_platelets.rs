@@ -105,14 +105,6 @@ fn stenosis_scene_records_platelets_inside_the_channel_moving_with_the_flow() {
     }
 }
 
-fn read_topic(path: &std::path::Path, topic: &str) -> Vec<Vec<u8>> {
-    let r = McapReader::open(path).unwrap();
-    r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap().data)
-        .collect()
-}
-
 /// `tests/launch/sph-platelets.toml`: the SPH tube's fluid snapshots as the platelets' carrier.
 /// Every platelet stays in the lumen; those at least a kernel support (1.2 mm) from the walls move
 /// at the local Poiseuille speed u(y) = 1.5 ū (1 − (y − a)²/a²) (ū = 0.05 m/s, a = 4 mm), to within

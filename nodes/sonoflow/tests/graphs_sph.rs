@@ -5,19 +5,10 @@
 
 mod common;
 use common::*;
-use sonoflow_mcap_io::{McapReader, ReadOptions};
 use sonoflow_messages::cdr;
 use sonoflow_messages::kinds::{FlowStats, ParticleSnapshot, VectorField};
 use sonoflow_messages::{plane, DT_CFL, DT_OUTPUT};
 use std::collections::HashMap;
-
-fn read_topic(path: &std::path::Path, topic: &str) -> Vec<Vec<u8>> {
-    let r = McapReader::open(path).unwrap();
-    r.messages(&ReadOptions { topics: Some(vec![topic.into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap().data)
-        .collect()
-}
 
 #[test]
 fn sph_tube_publishes_scatterers_truth_and_diagnostics_and_resumes_from_its_checkpoint() {
