@@ -326,6 +326,43 @@ pub fn load(path: &Path) -> Result<Vec<Record>, DataError> {
     Ok(r)
 }
 
+/// The in-bounds records of `records` split by shape into (training, test): a shuffle seeded by
+/// `seed` of the in-bounds records in their (index) order, the first round(`test_fraction` n)
+/// (at least one, at most n − 1) are test shapes. By shape, not by sample: a shape's angles of
+/// attack are exact combinations of the same solves, so a test shape must never be seen in
+/// training. `sonoflow platelet train` and the experiments use this one split.
+pub fn split_by_shape<'a>(
+    records: &'a [Record],
+    test_fraction: f64,
+    seed: u64,
+) -> Result<(Vec<&'a Record>, Vec<&'a Record>), DataError> {
+    if !(test_fraction > 0.0 && test_fraction < 1.0) {
+        return Err(DataError::Option {
+            field: "test_fraction",
+            value: test_fraction.to_string(),
+            allowed: "0 < test_fraction < 1",
+        });
+    }
+    let mut inb: Vec<&Record> = records.iter().filter(|r| r.set == Set::InBounds).collect();
+    inb.sort_by_key(|r| r.index);
+    if inb.len() < 2 {
+        return Err(DataError::Option {
+            field: "in-bounds shapes",
+            value: inb.len().to_string(),
+            allowed: "at least 2 to split",
+        });
+    }
+    let mut order: Vec<usize> = (0..inb.len()).collect();
+    {
+        use rand::seq::SliceRandom;
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+    }
+    let n_test = ((inb.len() as f64 * test_fraction).round() as usize).clamp(1, inb.len() - 1);
+    let test = order[..n_test].iter().map(|&i| inb[i]).collect();
+    let training = order[n_test..].iter().map(|&i| inb[i]).collect();
+    Ok((training, test))
+}
+
 /// Draws an angle of attack in [0, 2π) away (1e-3 rad) from the zeros of sin 2ψ and cos ψ.
 fn draw_angle(rng: &mut ChaCha8Rng) -> f64 {
     loop {

@@ -169,17 +169,8 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
     if !(a.test_fraction > 0.0 && a.test_fraction < 1.0) {
         anyhow::bail!("--test-fraction = {} is out of range: (0, 1)", a.test_fraction);
     }
-    // Split by shape, not by sample: a shape's angles of attack are exact combinations of the
-    // same two solves, so a test shape must not also be seen in training.
-    let mut order: Vec<usize> = (0..inb.len()).collect();
-    {
-        use rand::seq::SliceRandom;
-        use rand::SeedableRng;
-        order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(a.seed));
-    }
-    let n_test = ((inb.len() as f64 * a.test_fraction).round() as usize).clamp(1, inb.len() - 1);
-    let test: Vec<&Record> = order[..n_test].iter().map(|&i| inb[i]).collect();
-    let training: Vec<&Record> = order[n_test..].iter().map(|&i| inb[i]).collect();
+    // split by shape (the same split for every experiment with this seed)
+    let (training, test) = dataset::split_by_shape(&records, a.test_fraction, a.seed)?;
     let dtr = dataset::network_datasets(&training, a.angles, a.seed)?;
     let dte = dataset::network_datasets(&test, a.angles, a.seed)?;
     let dg = if gen.is_empty() { None } else { Some(dataset::network_datasets(&gen, a.angles, a.seed)?) };
