@@ -387,13 +387,15 @@ pub struct NetworkData {
 }
 
 /// Builds the network data sets of `records` (module doc), `angles` (1 ..= 64) ψ per shape drawn
-/// from `seed`.
+/// from `seed`. N's samples are grouped by shape (their position in `records`), so that a
+/// validation split keeps a shape's angles together.
 pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result<NetworkData, DataError> {
     if !(1..=64).contains(&angles) {
         return Err(DataError::Option { field: "angles", value: angles.to_string(), allowed: "1 ..= 64" });
     }
     let (mut xi, mut yi, mut xr, mut yr, mut ys) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for r in records {
+    let mut gi = Vec::new();
+    for (g, r) in records.iter().enumerate() {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ shape_rng(seed, r.set, r.index).gen::<u64>());
         for _ in 0..angles {
             let psi = draw_angle(&mut rng);
@@ -401,6 +403,7 @@ pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result
             let raw = crate::nn::model::translational_from_si(&t);
             xi.extend_from_slice(&network_inputs(&r.shape, psi));
             yi.extend_from_slice(&scale_translational(psi, raw)?);
+            gi.push(g as u64);
         }
         let [t_r, t_s] = rotational_from_si(&r.resistance.rotational());
         xr.extend_from_slice(&shape_inputs(&r.shape));
@@ -408,7 +411,7 @@ pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result
         ys.push(scale_rotational(t_s));
     }
     Ok(NetworkData {
-        n: Dataset::new(6, 3, xi, yi)?,
+        n: Dataset::new(6, 3, xi, yi)?.with_groups(gi)?,
         n_r: Dataset::new(5, 1, xr.clone(), yr)?,
         n_s: Dataset::new(5, 1, xr, ys)?,
     })
