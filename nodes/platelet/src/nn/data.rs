@@ -288,6 +288,13 @@ impl TrainingReport {
             o.best_validation_loss,
             self.sets.iter().map(|x| format!("{} n = {}", x.set, x.n)).collect::<Vec<_>>().join(", ")
         );
+        if o.refine_iterations_run > 0 {
+            let _ = writeln!(
+                s,
+                "\nL-BFGS refinement: {} iteration(s), kept {} (0: Adam's weights).",
+                o.refine_iterations_run, o.refine_best_iteration
+            );
+        }
         s
     }
 }
