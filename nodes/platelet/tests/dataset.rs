@@ -137,7 +137,10 @@ fn platelet_mirrors_are_symmetries_of_the_solved_targets() {
             n.output(&mut want);
             let got = targets(&rm, mx[5]);
             for k in 0..3 {
-                assert!((got[k] - want[k]).abs() < 1e-12 * (1.0 + want[k].abs()), "{s:?} ψ {psi} output {k}: {got:?} vs {want:?}");
+                assert!(
+                    (got[k] - want[k]).abs() < 1e-12 * (1.0 + want[k].abs()),
+                    "{s:?} ψ {psi} output {k}: {got:?} vs {want:?}"
+                );
             }
             // and t_p does not change sign trivially: the shape is asymmetric
             assert!(want[2].abs() > 1e-3, "{want:?}");

@@ -246,8 +246,11 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
         ..TrainConfig::default()
     };
     // N's mirror and loss weights; N_r and N_s: α_top ↔ α_bot, nothing flips
-    let n_cfg =
-        TrainConfig { mirror: Some(Mirror::platelet_n()), output_weights: a.n_output_weights.0.to_vec(), ..cfg.clone() };
+    let n_cfg = TrainConfig {
+        mirror: Some(Mirror::platelet_n()),
+        output_weights: a.n_output_weights.0.to_vec(),
+        ..cfg.clone()
+    };
     let shape_cfg = TrainConfig { mirror: Some(Mirror::platelet_shape()), ..cfg };
     n_cfg.validate().context("sonoflow platelet train: bad option (--epochs, --batch-size, --learning-rate, --final-learning-rate, --validation-fraction, --refine)")?;
     let records = dataset::load(&a.data)?;
@@ -545,7 +548,8 @@ mod tests {
         assert_eq!(a.mirror, MirrorUse::Average);
         assert_eq!(a.n_output_weights, OutputWeights([1.0, 1.0, 1.0]));
         assert_eq!(a.refine, 0);
-        let a = train_args(&["--mirror", "augment", "--n-output-weights", "1, 1,2.5", "--refine", "30"]).expect("valid");
+        let a =
+            train_args(&["--mirror", "augment", "--n-output-weights", "1, 1,2.5", "--refine", "30"]).expect("valid");
         assert_eq!((a.mirror, a.n_output_weights, a.refine), (MirrorUse::Augment, OutputWeights([1.0, 1.0, 2.5]), 30));
         assert_eq!(a.n_output_weights.to_string(), "1,1,2.5");
         for (args, needle) in [

@@ -307,7 +307,8 @@ impl Mlp {
         )
     }
 
-    /// Replaces the input standardisation and output scaling (validated as in [`Mlp::from_parts`]).
+    /// Replaces the input standardisation and output scaling (validated as in [`Mlp::from_parts`]);
+    /// keeps the mirror.
     pub fn with_normalisation(
         self,
         input_mean: Vec<f64>,
@@ -315,7 +316,9 @@ impl Mlp {
         output_mean: Vec<f64>,
         output_scale: Vec<f64>,
     ) -> Result<Self, NnError> {
-        Self::from_parts(self.sizes, self.weights, self.biases, input_mean, input_std, output_mean, output_scale)
+        let mirror = self.mirror;
+        Self::from_parts(self.sizes, self.weights, self.biases, input_mean, input_std, output_mean, output_scale)?
+            .with_mirror(mirror)
     }
 
     /// Makes the prediction mirror-averaged, ŷ(x) = ½ (N(x) + S N(M x)) (module doc), or plain
@@ -683,7 +686,12 @@ mod tests {
             for k in 0..3 {
                 assert!((y[i * 3 + k] - want[k]).abs() <= 1e-12 * (1.0 + want[k].abs()), "f64 sample {i} output {k}");
                 let e = (y32[i * 3 + k] as f64 - want[k]).abs();
-                assert!(e <= 1e-4 * (1.0 + want[k].abs()), "f32 sample {i} output {k}: {} vs {}", y32[i * 3 + k], want[k]);
+                assert!(
+                    e <= 1e-4 * (1.0 + want[k].abs()),
+                    "f32 sample {i} output {k}: {} vs {}",
+                    y32[i * 3 + k],
+                    want[k]
+                );
             }
             // exactly symmetric: the prediction at M x is S ŷ(x)
             let mut ym = [0.0; 3];
@@ -696,9 +704,13 @@ mod tests {
         m.forward_batch_par(&x32, &mut par).expect("sizes match");
         assert!(par.iter().zip(&y32).all(|(a, b)| a.to_bits() == b.to_bits()));
         // a mirror that does not fit the sizes is refused
-        let e = plain.with_mirror(Some(Mirror { swap: vec![(3, 6)], reflect: vec![], negate: vec![] })).expect_err("input 6");
+        let e = plain
+            .with_mirror(Some(Mirror { swap: vec![(3, 6)], reflect: vec![], negate: vec![] }))
+            .expect_err("input 6");
         assert!(e.to_string().contains("mirror"), "{e}");
-        let e = Mirror { swap: vec![(1, 2)], reflect: vec![(2, 1.0)], negate: vec![3] }.validate(6, 3).expect_err("output 3");
+        let e = Mirror { swap: vec![(1, 2)], reflect: vec![(2, 1.0)], negate: vec![3] }
+            .validate(6, 3)
+            .expect_err("output 3");
         assert!(e.to_string().contains("negate"), "{e}");
         assert!(Mirror { swap: vec![(1, 2), (2, 3)], reflect: vec![], negate: vec![] }.validate(6, 3).is_err());
         assert!(Mirror { swap: vec![], reflect: vec![(5, f64::NAN)], negate: vec![] }.validate(6, 3).is_err());

@@ -125,11 +125,7 @@ impl TrainConfig {
             );
         }
         if (self.augment_mirror || self.average_mirror) && self.mirror.is_none() {
-            return bad(
-                "mirror",
-                "none".into(),
-                "a mirror when augment_mirror or average_mirror is set",
-            );
+            return bad("mirror", "none".into(), "a mirror when augment_mirror or average_mirror is set");
         }
         if self.refine_iterations > 1_000_000 {
             return bad("refine_iterations", self.refine_iterations.to_string(), "0..=1000000");
@@ -480,7 +476,11 @@ pub fn train(sizes: &[usize], data: &Dataset, cfg: &TrainConfig) -> Result<(Mlp,
     }
     let (n_in, n_out) = (net.n_inputs(), net.n_outputs());
     if !cfg.output_weights.is_empty() && cfg.output_weights.len() != n_out {
-        return Err(NnError::Size { what: "output_weights (one per output)".into(), expected: n_out, got: cfg.output_weights.len() });
+        return Err(NnError::Size {
+            what: "output_weights (one per output)".into(),
+            expected: n_out,
+            got: cfg.output_weights.len(),
+        });
     }
     let mirror = cfg.uses_mirror();
     if let Some(m) = mirror {
@@ -835,8 +835,9 @@ pub(crate) mod tests {
             .expect_err("two weights, one output");
         assert!(e.to_string().contains("output_weights"), "{e}");
         let bad = Mirror { swap: vec![(3, 4)], reflect: vec![], negate: vec![1] };
-        let e = train(&[6, 4, 1], &data, &TrainConfig { mirror: Some(bad), augment_mirror: true, ..Default::default() })
-            .expect_err("output 1 of 1");
+        let e =
+            train(&[6, 4, 1], &data, &TrainConfig { mirror: Some(bad), augment_mirror: true, ..Default::default() })
+                .expect_err("output 1 of 1");
         assert!(e.to_string().contains("negate"), "{e}");
     }
 
@@ -851,7 +852,12 @@ pub(crate) mod tests {
         assert!(r.refine_best_iteration > 0);
         // the same Adam phase, then a much lower validation loss
         assert_eq!(a.validation_loss, r.validation_loss);
-        assert!(r.best_validation_loss < 0.9 * a.best_validation_loss, "{} vs {}", r.best_validation_loss, a.best_validation_loss);
+        assert!(
+            r.best_validation_loss < 0.9 * a.best_validation_loss,
+            "{} vs {}",
+            r.best_validation_loss,
+            a.best_validation_loss
+        );
         let err = |net: &Mlp| crate::nn::evaluate(net, &data).expect("sizes")[0].mean_rel_pct;
         assert!(err(&refined) < err(&adam), "{} vs {}", err(&refined), err(&adam));
         // the training loss of the accepted steps never rises (Armijo)
