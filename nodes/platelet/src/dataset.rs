@@ -326,6 +326,43 @@ pub fn load(path: &Path) -> Result<Vec<Record>, DataError> {
     Ok(r)
 }
 
+/// The in-bounds records of `records` split by shape into (training, test): a shuffle seeded by
+/// `seed` of the in-bounds records in their (index) order, the first round(`test_fraction` n)
+/// (at least one, at most n − 1) are test shapes. By shape, not by sample: a shape's angles of
+/// attack are exact combinations of the same solves, so a test shape must never be seen in
+/// training. `sonoflow platelet train` and the experiments use this one split.
+pub fn split_by_shape<'a>(
+    records: &'a [Record],
+    test_fraction: f64,
+    seed: u64,
+) -> Result<(Vec<&'a Record>, Vec<&'a Record>), DataError> {
+    if !(test_fraction > 0.0 && test_fraction < 1.0) {
+        return Err(DataError::Option {
+            field: "test_fraction",
+            value: test_fraction.to_string(),
+            allowed: "0 < test_fraction < 1",
+        });
+    }
+    let mut inb: Vec<&Record> = records.iter().filter(|r| r.set == Set::InBounds).collect();
+    inb.sort_by_key(|r| r.index);
+    if inb.len() < 2 {
+        return Err(DataError::Option {
+            field: "in-bounds shapes",
+            value: inb.len().to_string(),
+            allowed: "at least 2 to split",
+        });
+    }
+    let mut order: Vec<usize> = (0..inb.len()).collect();
+    {
+        use rand::seq::SliceRandom;
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+    }
+    let n_test = ((inb.len() as f64 * test_fraction).round() as usize).clamp(1, inb.len() - 1);
+    let test = order[..n_test].iter().map(|&i| inb[i]).collect();
+    let training = order[n_test..].iter().map(|&i| inb[i]).collect();
+    Ok((training, test))
+}
+
 /// Draws an angle of attack in [0, 2π) away (1e-3 rad) from the zeros of sin 2ψ and cos ψ.
 fn draw_angle(rng: &mut ChaCha8Rng) -> f64 {
     loop {
@@ -350,13 +387,15 @@ pub struct NetworkData {
 }
 
 /// Builds the network data sets of `records` (module doc), `angles` (1 ..= 64) ψ per shape drawn
-/// from `seed`.
+/// from `seed`. N's samples are grouped by shape (their position in `records`), so that a
+/// validation split keeps a shape's angles together.
 pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result<NetworkData, DataError> {
     if !(1..=64).contains(&angles) {
         return Err(DataError::Option { field: "angles", value: angles.to_string(), allowed: "1 ..= 64" });
     }
     let (mut xi, mut yi, mut xr, mut yr, mut ys) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for r in records {
+    let mut gi = Vec::new();
+    for (g, r) in records.iter().enumerate() {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ shape_rng(seed, r.set, r.index).gen::<u64>());
         for _ in 0..angles {
             let psi = draw_angle(&mut rng);
@@ -364,6 +403,7 @@ pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result
             let raw = crate::nn::model::translational_from_si(&t);
             xi.extend_from_slice(&network_inputs(&r.shape, psi));
             yi.extend_from_slice(&scale_translational(psi, raw)?);
+            gi.push(g as u64);
         }
         let [t_r, t_s] = rotational_from_si(&r.resistance.rotational());
         xr.extend_from_slice(&shape_inputs(&r.shape));
@@ -371,7 +411,7 @@ pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result
         ys.push(scale_rotational(t_s));
     }
     Ok(NetworkData {
-        n: Dataset::new(6, 3, xi, yi)?,
+        n: Dataset::new(6, 3, xi, yi)?.with_groups(gi)?,
         n_r: Dataset::new(5, 1, xr.clone(), yr)?,
         n_s: Dataset::new(5, 1, xr, ys)?,
     })

@@ -109,3 +109,50 @@ fn network_targets_are_eq_18_of_the_solved_resistance() {
     }
     assert!(network_datasets(&refs, 0, 1).is_err());
 }
+
+/// The mirrors the trainer averages over ([`Mirror::platelet_n`], [`Mirror::platelet_shape`]) are
+/// exact symmetries of the solver's targets: for a shape and its mirror image (α_top ↔ α_bot),
+/// solved independently, the eq 18 targets at the mirrored input M x are S times those at x.
+#[test]
+fn platelet_mirrors_are_symmetries_of_the_solved_targets() {
+    use sonoflow_platelet::nn::mlp::Mirror;
+    use sonoflow_platelet::nn::model::{network_inputs, scale_translational, shape_inputs};
+    use sonoflow_platelet::{solve_shape, Shape};
+    let opts = StokesOptions { n_beta: 8, ..StokesOptions::default() }; // the paper's ball, coarse
+    let targets = |r: &sonoflow_platelet::ShapeResistance, psi: f64| {
+        scale_translational(psi, translational_from_si(&r.translational(psi))).expect("away from the zeros")
+    };
+    let shapes = [Shape::from_um(3.1, 0.7, 2.8, 0.3, 1.7), Shape::from_um(2.7, 0.35, 3.3, 1.4, 0.6)];
+    for s in shapes {
+        let m = Shape { alpha_top: s.alpha_bot, alpha_bot: s.alpha_top, ..s };
+        let (rs, rm) = (solve_shape(&s, &opts).expect("solve"), solve_shape(&m, &opts).expect("solve"));
+        // N: (d, l, t_p) at M x = S (d, l, t_p) at x
+        let n = Mirror::platelet_n();
+        for psi in [0.3, 1.2, 2.0, 3.5, 5.9] {
+            let x = network_inputs(&s, psi);
+            let mut mx = [0.0; 6];
+            n.input(&x, &mut mx);
+            assert_eq!(mx, network_inputs(&m, 2.0 * std::f64::consts::PI - psi), "M x is the mirror image at −ψ");
+            let mut want = targets(&rs, psi);
+            n.output(&mut want);
+            let got = targets(&rm, mx[5]);
+            for k in 0..3 {
+                assert!(
+                    (got[k] - want[k]).abs() < 1e-12 * (1.0 + want[k].abs()),
+                    "{s:?} ψ {psi} output {k}: {got:?} vs {want:?}"
+                );
+            }
+            // and t_p does not change sign trivially: the shape is asymmetric
+            assert!(want[2].abs() > 1e-3, "{want:?}");
+        }
+        // N_r, N_s: the same t_r and t_s
+        let sh = Mirror::platelet_shape();
+        let mut mx = [0.0; 5];
+        sh.input(&shape_inputs(&s), &mut mx);
+        assert_eq!(mx, shape_inputs(&m));
+        let (a, b) = (rotational_from_si(&rs.rotational()), rotational_from_si(&rm.rotational()));
+        for k in 0..2 {
+            assert!((a[k] - b[k]).abs() < 1e-12 * a[k].abs(), "{s:?}: {a:?} vs {b:?}");
+        }
+    }
+}

@@ -6,6 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use sonoflow_platelet::dataset::{self, GenerateOptions, Record, Set};
 use sonoflow_platelet::nn::data::{evaluate, SetErrors, TrainingReport};
+use sonoflow_platelet::nn::mlp::Mirror;
 use sonoflow_platelet::nn::model::NetworkModel;
 use sonoflow_platelet::nn::train::TrainConfig;
 use sonoflow_platelet::stokes::{Outer, StokesOptions, PAPER_BALL_RADIUS};
@@ -101,6 +102,69 @@ pub struct TrainArgs {
     /// Stop after this many epochs without a better validation loss (0: never).
     #[arg(long, default_value_t = TrainConfig::default().patience)]
     pub patience: usize,
+    /// Adam step at the last epoch (the cosine decay runs from --learning-rate to this).
+    #[arg(long, default_value_t = TrainConfig::default().final_learning_rate)]
+    pub final_learning_rate: f64,
+    /// Fraction of the training shapes held out to pick the best weights (0 ..= 0.5).
+    #[arg(long, default_value_t = TrainConfig::default().validation_fraction)]
+    pub validation_fraction: f64,
+    /// Loss weights of N's outputs d, l, t_p: three comma-separated numbers >= 0, not all 0.
+    #[arg(long, default_value = "1,1,1", value_parser = parse_weights3)]
+    pub n_output_weights: OutputWeights,
+    /// The mirror symmetry α_top ↔ α_bot (ψ → 2π − ψ; t_p flips, everything else keeps its
+    /// value): `average` predicts ½ (N(x) + S N(M x)), which has the symmetry exactly (twice the
+    /// evaluation cost), `augment` adds the mirror images as training samples, `off` ignores it.
+    #[arg(long, value_enum, default_value_t = MirrorUse::Average)]
+    pub mirror: MirrorUse,
+    /// Full-batch L-BFGS iterations after Adam (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub refine: usize,
+}
+
+/// Loss weights of N's three outputs (d, l, t_p).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutputWeights(pub [f64; 3]);
+
+impl std::fmt::Display for OutputWeights {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{},{},{}", self.0[0], self.0[1], self.0[2])
+    }
+}
+
+fn parse_weights3(s: &str) -> Result<OutputWeights, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let values: Vec<f64> = parts
+        .iter()
+        .map(|p| p.parse::<f64>().map_err(|_| format!("`{p}` is not a number")))
+        .collect::<Result<_, _>>()?;
+    let [d, l, t] = values[..] else {
+        return Err(format!("expected three comma-separated weights (d, l, t_p), got {}", values.len()));
+    };
+    if values.iter().any(|w| !(w.is_finite() && *w >= 0.0)) || values.iter().all(|w| *w == 0.0) {
+        return Err("the weights must be finite, >= 0 and not all 0".into());
+    }
+    Ok(OutputWeights([d, l, t]))
+}
+
+/// How training uses the platelet's mirror symmetry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MirrorUse {
+    /// Mirror-averaged networks (exact symmetry).
+    Average,
+    /// Mirror images as extra training samples.
+    Augment,
+    /// No use of the symmetry.
+    Off,
+}
+
+impl MirrorUse {
+    fn name(self) -> &'static str {
+        match self {
+            MirrorUse::Average => "average",
+            MirrorUse::Augment => "augment",
+            MirrorUse::Off => "off",
+        }
+    }
 }
 
 pub fn run(cmd: &PlateletCmd) -> anyhow::Result<i32> {
@@ -161,47 +225,54 @@ fn split(records: &[Record]) -> (Vec<&Record>, Vec<&Record>) {
 }
 
 fn train(a: &TrainArgs) -> anyhow::Result<i32> {
+    // the options first: a bad value fails before the data are read
+    if !(a.test_fraction > 0.0 && a.test_fraction < 1.0) {
+        anyhow::bail!("--test-fraction = {} is out of range: (0, 1)", a.test_fraction);
+    }
+    if a.restarts == 0 {
+        anyhow::bail!("--restarts must be at least 1");
+    }
+    let cfg = TrainConfig {
+        epochs: a.epochs,
+        seed: a.seed,
+        learning_rate: a.learning_rate,
+        final_learning_rate: a.final_learning_rate,
+        validation_fraction: a.validation_fraction,
+        batch_size: a.batch_size,
+        patience: a.patience,
+        augment_mirror: a.mirror == MirrorUse::Augment,
+        average_mirror: a.mirror == MirrorUse::Average,
+        refine_iterations: a.refine,
+        ..TrainConfig::default()
+    };
+    // N's mirror and loss weights; N_r and N_s: α_top ↔ α_bot, nothing flips
+    let n_cfg = TrainConfig {
+        mirror: Some(Mirror::platelet_n()),
+        output_weights: a.n_output_weights.0.to_vec(),
+        ..cfg.clone()
+    };
+    let shape_cfg = TrainConfig { mirror: Some(Mirror::platelet_shape()), ..cfg };
+    n_cfg.validate().context("sonoflow platelet train: bad option (--epochs, --batch-size, --learning-rate, --final-learning-rate, --validation-fraction, --refine)")?;
     let records = dataset::load(&a.data)?;
     let (inb, gen) = split(&records);
     if inb.len() < 10 {
         anyhow::bail!("{}: {} in-bounds shapes; training needs at least 10", a.data.display(), inb.len());
     }
-    if !(a.test_fraction > 0.0 && a.test_fraction < 1.0) {
-        anyhow::bail!("--test-fraction = {} is out of range: (0, 1)", a.test_fraction);
-    }
-    // Split by shape, not by sample: a shape's angles of attack are exact combinations of the
-    // same two solves, so a test shape must not also be seen in training.
-    let mut order: Vec<usize> = (0..inb.len()).collect();
-    {
-        use rand::seq::SliceRandom;
-        use rand::SeedableRng;
-        order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(a.seed));
-    }
-    let n_test = ((inb.len() as f64 * a.test_fraction).round() as usize).clamp(1, inb.len() - 1);
-    let test: Vec<&Record> = order[..n_test].iter().map(|&i| inb[i]).collect();
-    let training: Vec<&Record> = order[n_test..].iter().map(|&i| inb[i]).collect();
+    // split by shape (the same split for every experiment with this seed)
+    let (training, test) = dataset::split_by_shape(&records, a.test_fraction, a.seed)?;
     let dtr = dataset::network_datasets(&training, a.angles, a.seed)?;
     let dte = dataset::network_datasets(&test, a.angles, a.seed)?;
     let dg = if gen.is_empty() { None } else { Some(dataset::network_datasets(&gen, a.angles, a.seed)?) };
-    let cfg = TrainConfig {
-        epochs: a.epochs,
-        seed: a.seed,
-        learning_rate: a.learning_rate,
-        batch_size: a.batch_size,
-        patience: a.patience,
-        ..TrainConfig::default()
-    };
-    cfg.validate()?;
     let t0 = Instant::now();
     let mut reports: Vec<TrainingReport> = Vec::new();
     let mut nets = Vec::new();
     type Pick = fn(&dataset::NetworkData) -> &sonoflow_platelet::nn::data::Dataset;
-    let nets_spec: [(&str, Vec<usize>, Vec<&str>, Pick); 3] = [
-        ("N", vec![6, 50, 20, 20, 3], vec!["drag d", "lift l", "pitching torque t_p"], |d| &d.n),
-        ("N_r", vec![5, 20, 20, 20, 1], vec!["rotational torque t_r"], |d| &d.n_r),
-        ("N_s", vec![5, 20, 20, 20, 1], vec!["strain torque t_s"], |d| &d.n_s),
+    let nets_spec: [(&str, Vec<usize>, Vec<&str>, Pick, &TrainConfig); 3] = [
+        ("N", vec![6, 50, 20, 20, 3], vec!["drag d", "lift l", "pitching torque t_p"], |d| &d.n, &n_cfg),
+        ("N_r", vec![5, 20, 20, 20, 1], vec!["rotational torque t_r"], |d| &d.n_r, &shape_cfg),
+        ("N_s", vec![5, 20, 20, 20, 1], vec!["strain torque t_s"], |d| &d.n_s, &shape_cfg),
     ];
-    for (name, sizes, outputs, pick) in nets_spec {
+    for (name, sizes, outputs, pick, cfg) in nets_spec {
         let t = Instant::now();
         // `restarts` trainings from different initial weights and shuffles (the shape split stays
         // the same); the one with the lowest validation loss (part of the training shapes, never
@@ -265,7 +336,7 @@ fn write_report(
 ) -> anyhow::Result<()> {
     let (inb, gen) = split(records);
     let mut md = format!(
-        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}; {} epoch(s) at most, {} restart(s) per network (kept: the lowest validation loss). Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nReproduce: `sonoflow platelet train --data {} --out {} --epochs {} --patience {} --restarts {} --seed {}`.\n\n",
+        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}; {} epoch(s) at most, {} restart(s) per network (kept: the lowest validation loss). Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nRecipe: Adam, batch {}, cosine step {:e} → {:e}, validation {} of the training shapes; mirror symmetry: {}; loss weights of N (d, l, t_p): {}; L-BFGS refinement: {} iteration(s).\n\nReproduce: `sonoflow platelet train --data {} --out {} --epochs {} --patience {} --restarts {} --seed {} --batch-size {} --learning-rate {} --final-learning-rate {} --validation-fraction {} --mirror {} --n-output-weights {} --refine {}`.\n\n",
         data.display(),
         inb.len(),
         a.angles,
@@ -276,12 +347,30 @@ fn write_report(
         a.epochs,
         a.restarts,
         secs,
+        a.batch_size,
+        a.learning_rate,
+        a.final_learning_rate,
+        a.validation_fraction,
+        match a.mirror {
+            MirrorUse::Average => "mirror-averaged networks, ŷ = ½ (N(x) + S N(M x)) (M: α_top ↔ α_bot, ψ → 2π − ψ; S flips t_p)",
+            MirrorUse::Augment => "mirror images added to the training samples",
+            MirrorUse::Off => "not used",
+        },
+        a.n_output_weights,
+        a.refine,
         data.display(),
         out.display(),
         a.epochs,
         a.patience,
         a.restarts,
-        a.seed
+        a.seed,
+        a.batch_size,
+        a.learning_rate,
+        a.final_learning_rate,
+        a.validation_fraction,
+        a.mirror.name(),
+        a.n_output_weights,
+        a.refine
     );
     for r in reports {
         md.push_str(&r.to_markdown());
@@ -430,4 +519,73 @@ fn five(a: &FiveArgs) -> anyhow::Result<i32> {
     println!("{md}");
     println!("figures: {}, {}", a.out.join(&f1.path).display(), a.out.join(&f2.path).display());
     Ok(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(clap::Parser, Debug)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: PlateletCmd,
+    }
+
+    fn train_args(extra: &[&str]) -> Result<TrainArgs, String> {
+        let mut argv = vec!["platelet", "train"];
+        argv.extend_from_slice(extra);
+        match Cli::try_parse_from(argv) {
+            Ok(Cli { cmd: PlateletCmd::Train(a) }) => Ok(a),
+            Ok(other) => Err(format!("{other:?}")),
+            Err(e) => Err(e.to_string()),
+        }
+    }
+
+    #[test]
+    fn trainer_options_parse_and_bad_values_are_named() {
+        let a = train_args(&[]).expect("defaults");
+        assert_eq!(a.mirror, MirrorUse::Average);
+        assert_eq!(a.n_output_weights, OutputWeights([1.0, 1.0, 1.0]));
+        assert_eq!(a.refine, 0);
+        let a =
+            train_args(&["--mirror", "augment", "--n-output-weights", "1, 1,2.5", "--refine", "30"]).expect("valid");
+        assert_eq!((a.mirror, a.n_output_weights, a.refine), (MirrorUse::Augment, OutputWeights([1.0, 1.0, 2.5]), 30));
+        assert_eq!(a.n_output_weights.to_string(), "1,1,2.5");
+        for (args, needle) in [
+            (&["--mirror", "sideways"][..], "sideways"),
+            (&["--n-output-weights", "1,2"], "three comma-separated"),
+            (&["--n-output-weights", "1,x,2"], "`x` is not a number"),
+            (&["--n-output-weights", "1,-1,2"], ">= 0"),
+            (&["--n-output-weights", "0,0,0"], "not all 0"),
+            (&["--refine", "many"], "--refine"),
+        ] {
+            let e = train_args(args).expect_err("invalid");
+            assert!(e.contains(needle), "{args:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_trainer_values_fail_before_the_data_are_read() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let missing = dir.path().join("none.jsonl");
+        let d = missing.to_str().expect("utf-8 path");
+        for (args, needle) in [
+            (&["--final-learning-rate", "0.5"][..], "final_learning_rate"),
+            (&["--learning-rate", "0"], "learning_rate"),
+            (&["--validation-fraction", "0.7"], "validation_fraction"),
+            (&["--refine", "2000000"], "refine_iterations"),
+            (&["--restarts", "0"], "--restarts"),
+            (&["--test-fraction", "1"], "--test-fraction"),
+        ] {
+            let mut argv = vec!["--data", d];
+            argv.extend_from_slice(args);
+            let e = train(&train_args(&argv).expect("parses")).expect_err("out of range");
+            let text = format!("{e:#}");
+            assert!(text.contains(needle) && !text.contains("none.jsonl"), "{args:?}: {text}");
+        }
+        // valid options: then the missing data file is reported
+        let e = train(&train_args(&["--data", d]).expect("valid")).expect_err("no file");
+        assert!(e.to_string().contains("none.jsonl"), "{e}");
+    }
 }

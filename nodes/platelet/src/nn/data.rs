@@ -26,6 +26,10 @@ pub struct Dataset {
     n_outputs: usize,
     inputs: Vec<f64>,
     targets: Vec<f64>,
+    /// Group of each sample (e.g. the shape it comes from), or empty: every sample its own group.
+    /// The validation split of [`super::train::train`] keeps a group together.
+    #[serde(default)]
+    groups: Vec<u64>,
 }
 
 impl Dataset {
@@ -58,7 +62,22 @@ impl Dataset {
                 return Err(NnError::NonFinite { what: what.into(), index });
             }
         }
-        Ok(Dataset { n_inputs, n_outputs, inputs, targets })
+        Ok(Dataset { n_inputs, n_outputs, inputs, targets, groups: Vec::new() })
+    }
+
+    /// The same samples with a group per sample (e.g. the shape index; samples of one group stay
+    /// on one side of the validation split).
+    pub fn with_groups(mut self, groups: Vec<u64>) -> Result<Self, NnError> {
+        if groups.len() != self.len() {
+            return Err(NnError::Size { what: "data set groups".into(), expected: self.len(), got: groups.len() });
+        }
+        self.groups = groups;
+        Ok(self)
+    }
+
+    /// Group of each sample (empty: none given, every sample is its own group).
+    pub fn groups(&self) -> &[u64] {
+        &self.groups
     }
 
     /// Number of samples.
@@ -94,6 +113,7 @@ impl Dataset {
             n_outputs: b,
             inputs: idx.iter().flat_map(|&i| self.inputs[i * a..(i + 1) * a].iter().copied()).collect(),
             targets: idx.iter().flat_map(|&i| self.targets[i * b..(i + 1) * b].iter().copied()).collect(),
+            groups: if self.groups.is_empty() { Vec::new() } else { idx.iter().map(|&i| self.groups[i]).collect() },
         }
     }
 
@@ -268,6 +288,13 @@ impl TrainingReport {
             o.best_validation_loss,
             self.sets.iter().map(|x| format!("{} n = {}", x.set, x.n)).collect::<Vec<_>>().join(", ")
         );
+        if o.refine_iterations_run > 0 {
+            let _ = writeln!(
+                s,
+                "\nL-BFGS refinement: {} iteration(s), kept {} (0: Adam's weights).",
+                o.refine_iterations_run, o.refine_best_iteration
+            );
+        }
         s
     }
 }

@@ -12,6 +12,13 @@
 //! thread count). The buffers live in a caller-owned [`MlpWorkspace`] (or one per rayon thread),
 //! so the hot path does not allocate.
 //!
+//! **Mirror-averaged networks** ([`Mirror`], [`Mlp::with_mirror`]): an exact symmetry of the
+//! data, "the target of the mirrored input M x is S y" (S flips the sign of some outputs), can be
+//! built into the prediction: ŷ(x) = ½ (N(x) + S N(M x)). The layers are the plain network's; the
+//! prediction then has the symmetry exactly, at twice the evaluation cost. For the platelet
+//! network N, M exchanges α_top and α_bot and reflects ψ → 2π − ψ (the body mirrored about its x
+//! axis), and S flips the pitching torque.
+//!
 //! **Training** uses the f64 weights ([`Mlp::predict`] and `super::train`); the f32 copies are
 //! rebuilt whenever the weights change.
 
@@ -25,11 +32,100 @@ use std::cell::RefCell;
 /// Samples per inference tile (lanes of the vectorised loops).
 pub const TILE: usize = 64;
 
+/// An exact symmetry of a network's data (module doc): the mirrored input M x exchanges the
+/// inputs of each pair in `swap`, then reflects each input of `reflect` as x → p − x (a periodic
+/// angle: ψ → 2π − ψ), and its target is the original one with the outputs `negate` sign-flipped.
+/// M is an involution.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mirror {
+    /// Pairs of inputs exchanged.
+    pub swap: Vec<(usize, usize)>,
+    /// Inputs reflected x → p − x, with p.
+    pub reflect: Vec<(usize, f64)>,
+    /// Outputs whose sign flips.
+    pub negate: Vec<usize>,
+}
+
+impl Mirror {
+    /// Paper 2's platelet mirrored about its x axis for N (inputs Lx, Ly, Lz, α_top, α_bot, ψ;
+    /// outputs d, l, t_p): α_top ↔ α_bot, ψ → 2π − ψ; d and l (eq 18-scaled) keep their value,
+    /// t_p flips.
+    pub fn platelet_n() -> Self {
+        Mirror { swap: vec![(3, 4)], reflect: vec![(5, 2.0 * std::f64::consts::PI)], negate: vec![2] }
+    }
+
+    /// The same mirror for N_r and N_s (inputs Lx, Ly, Lz, α_top, α_bot): α_top ↔ α_bot; t_r and
+    /// t_s keep their value.
+    pub fn platelet_shape() -> Self {
+        Mirror { swap: vec![(3, 4)], reflect: Vec::new(), negate: Vec::new() }
+    }
+
+    /// Checks the indices against the network's sizes (each input and output used at most once),
+    /// and finite periods.
+    pub fn validate(&self, n_inputs: usize, n_outputs: usize) -> Result<(), NnError> {
+        let bad = |value: String, allowed| Err(NnError::Config { field: "mirror", value, allowed });
+        let mut seen = vec![false; n_inputs];
+        for &(a, b) in &self.swap {
+            for i in [a, b] {
+                if i >= n_inputs || seen[i] {
+                    return bad(format!("swap {:?}", self.swap), "distinct input indices below the input count");
+                }
+                seen[i] = true;
+            }
+        }
+        let mut seen = vec![false; n_inputs];
+        for &(i, p) in &self.reflect {
+            if i >= n_inputs || seen[i] || !p.is_finite() {
+                return bad(format!("reflect {:?}", self.reflect), "distinct input indices, finite periods");
+            }
+            seen[i] = true;
+        }
+        let mut seen = vec![false; n_outputs];
+        for &k in &self.negate {
+            if k >= n_outputs || seen[k] {
+                return bad(format!("negate {:?}", self.negate), "distinct output indices below the output count");
+            }
+            seen[k] = true;
+        }
+        Ok(())
+    }
+
+    /// Writes M x into `out` (raw inputs).
+    pub fn input(&self, x: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(x);
+        for &(a, b) in &self.swap {
+            out.swap(a, b);
+        }
+        for &(i, p) in &self.reflect {
+            out[i] = p - out[i];
+        }
+    }
+
+    /// S y in place.
+    pub fn output(&self, y: &mut [f64]) {
+        for &k in &self.negate {
+            y[k] = -y[k];
+        }
+    }
+
+    /// ±1 per output (the diagonal of S).
+    pub fn output_signs(&self, n_outputs: usize) -> Vec<f64> {
+        let mut s = vec![1.0; n_outputs];
+        self.output(&mut s);
+        s
+    }
+}
+
 /// Caller-owned buffers of the f32 forward pass; grows on first use, then never allocates.
 #[derive(Clone, Debug, Default)]
 pub struct MlpWorkspace {
     a: Vec<f32>,
     b: Vec<f32>,
+    /// Scaled outputs of a tile (n_out rows of `TILE` lanes).
+    c: Vec<f32>,
+    /// Standardised mirrored inputs of a tile (mirror-averaged networks).
+    mi: Vec<f32>,
     row_in: Vec<f32>,
     row_out: Vec<f32>,
 }
@@ -45,6 +141,10 @@ impl MlpWorkspace {
         if self.a.len() < width {
             self.a.resize(width, 0.0);
             self.b.resize(width, 0.0);
+        }
+        self.c.resize(mlp.n_outputs() * TILE, 0.0);
+        if mlp.mirror.is_some() {
+            self.mi.resize(mlp.n_inputs() * TILE, 0.0);
         }
         self.row_in.resize(mlp.n_inputs(), 0.0);
         self.row_out.resize(mlp.n_outputs(), 0.0);
@@ -76,6 +176,7 @@ pub struct Mlp {
     in_inv_std32: Vec<f32>,
     out_mean32: Vec<f32>,
     out_scale32: Vec<f32>,
+    mirror: Option<Mirror>,
 }
 
 fn check_finite(what: &str, v: &[f64]) -> Result<(), NnError> {
@@ -171,6 +272,7 @@ impl Mlp {
             in_inv_std32: Vec::new(),
             out_mean32: Vec::new(),
             out_scale32: Vec::new(),
+            mirror: None,
         };
         mlp.sync_f32();
         Ok(mlp)
@@ -205,7 +307,8 @@ impl Mlp {
         )
     }
 
-    /// Replaces the input standardisation and output scaling (validated as in [`Mlp::from_parts`]).
+    /// Replaces the input standardisation and output scaling (validated as in [`Mlp::from_parts`]);
+    /// keeps the mirror.
     pub fn with_normalisation(
         self,
         input_mean: Vec<f64>,
@@ -213,7 +316,24 @@ impl Mlp {
         output_mean: Vec<f64>,
         output_scale: Vec<f64>,
     ) -> Result<Self, NnError> {
-        Self::from_parts(self.sizes, self.weights, self.biases, input_mean, input_std, output_mean, output_scale)
+        let mirror = self.mirror;
+        Self::from_parts(self.sizes, self.weights, self.biases, input_mean, input_std, output_mean, output_scale)?
+            .with_mirror(mirror)
+    }
+
+    /// Makes the prediction mirror-averaged, ŷ(x) = ½ (N(x) + S N(M x)) (module doc), or plain
+    /// (`None`). Validates the mirror against the sizes.
+    pub fn with_mirror(mut self, mirror: Option<Mirror>) -> Result<Self, NnError> {
+        if let Some(m) = &mirror {
+            m.validate(self.n_inputs(), self.n_outputs())?;
+        }
+        self.mirror = mirror;
+        Ok(self)
+    }
+
+    /// The mirror the prediction is averaged over, if any.
+    pub fn mirror(&self) -> Option<&Mirror> {
+        self.mirror.as_ref()
     }
 
     /// Rebuilds the f32 inference copies after the f64 weights changed.
@@ -307,12 +427,25 @@ impl Mlp {
         check_len("predict: output entries", n * n_out, outputs.len())?;
         let mut acts = Vec::new();
         let mut xs = vec![0.0; n_in];
+        let mut xm = vec![0.0; n_in];
+        let mut ym = vec![0.0; n_out];
         for (x, y) in inputs.chunks_exact(n_in).zip(outputs.chunks_exact_mut(n_out)) {
             self.standardise_f64(x, &mut xs);
             self.forward_raw_f64(&xs, &mut acts);
             let raw = &acts[self.n_layers()];
             for k in 0..n_out {
                 y[k] = self.output_mean[k] + self.output_scale[k] * raw[k];
+            }
+            if let Some(m) = &self.mirror {
+                m.input(x, &mut xm);
+                self.standardise_f64(&xm, &mut xs);
+                self.forward_raw_f64(&xs, &mut acts);
+                let raw = &acts[self.n_layers()];
+                for k in 0..n_out {
+                    ym[k] = self.output_mean[k] + self.output_scale[k] * raw[k];
+                }
+                m.output(&mut ym);
+                y.iter_mut().zip(&ym).for_each(|(a, b)| *a = 0.5 * (*a + b));
             }
         }
         Ok(())
@@ -360,7 +493,8 @@ impl Mlp {
     {
         ws.ensure(self);
         let (n_in, n_out) = (self.n_inputs(), self.n_outputs());
-        let MlpWorkspace { a, b, row_in, row_out } = ws;
+        let MlpWorkspace { a, b, c, mi, row_in, row_out } = ws;
+        let mirror = self.mirror.as_ref();
         let mut start = 0;
         while start < n {
             let m = TILE.min(n - start);
@@ -369,14 +503,46 @@ impl Mlp {
                 for k in 0..n_in {
                     a[k * TILE + s] = (row_in[k] - self.in_mean32[k]) * self.in_inv_std32[k];
                 }
+                if let Some(mr) = mirror {
+                    for &(i, j) in &mr.swap {
+                        row_in.swap(i, j);
+                    }
+                    for &(i, p) in &mr.reflect {
+                        row_in[i] = p as f32 - row_in[i];
+                    }
+                    for k in 0..n_in {
+                        mi[k * TILE + s] = (row_in[k] - self.in_mean32[k]) * self.in_inv_std32[k];
+                    }
+                }
             }
             for k in 0..n_in {
                 a[k * TILE + m..(k + 1) * TILE].fill(0.0);
+                if mirror.is_some() {
+                    mi[k * TILE + m..(k + 1) * TILE].fill(0.0);
+                }
             }
             let out: &[f32] = if self.run_tile(a, b) { a } else { b };
+            // scaled outputs of the plain pass
+            for k in 0..n_out {
+                for s in 0..m {
+                    c[k * TILE + s] = self.out_mean32[k] + self.out_scale32[k] * out[k * TILE + s];
+                }
+            }
+            if let Some(mr) = mirror {
+                // ½ (N(x) + S N(M x)) in scaled units
+                a[..n_in * TILE].copy_from_slice(&mi[..n_in * TILE]);
+                let out: &[f32] = if self.run_tile(a, b) { a } else { b };
+                for k in 0..n_out {
+                    let sign = if mr.negate.contains(&k) { -1.0f32 } else { 1.0 };
+                    for s in 0..m {
+                        let y = self.out_mean32[k] + self.out_scale32[k] * out[k * TILE + s];
+                        c[k * TILE + s] = 0.5 * (c[k * TILE + s] + sign * y);
+                    }
+                }
+            }
             for s in 0..m {
                 for k in 0..n_out {
-                    row_out[k] = self.out_mean32[k] + self.out_scale32[k] * out[k * TILE + s];
+                    row_out[k] = c[k * TILE + s];
                 }
                 emit(start + s, row_out);
             }
@@ -497,6 +663,57 @@ mod tests {
         let mut one = vec![0.0f32; 3];
         m.forward_batch(&x[6 * 100..6 * 101], &mut one, &mut MlpWorkspace::new()).expect("sizes match");
         assert_eq!(one, serial[300..303]);
+    }
+
+    #[test]
+    fn mirror_averaged_prediction_is_the_average_over_the_mirror_in_both_paths() {
+        let plain = net();
+        let m = plain.clone().with_mirror(Some(Mirror::platelet_n())).expect("fits 6 -> 3");
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        let n = 2 * TILE + 9;
+        let x64: Vec<f64> = (0..n * 6).map(|_| rng.gen_range(0.1..6.0)).collect();
+        let mut y = vec![0.0; n * 3];
+        m.predict(&x64, &mut y).expect("sizes match");
+        let mut y32 = vec![0.0f32; n * 3];
+        let x32: Vec<f32> = x64.iter().map(|&v| v as f32).collect();
+        m.forward_batch(&x32, &mut y32, &mut MlpWorkspace::new()).expect("sizes match");
+        for i in 0..n {
+            let x = &x64[i * 6..(i + 1) * 6];
+            // M x by hand: α_top ↔ α_bot, ψ → 2π − ψ
+            let mx = [x[0], x[1], x[2], x[4], x[3], 2.0 * std::f64::consts::PI - x[5]];
+            let (a, b) = (reference(&plain, x), reference(&plain, &mx));
+            let want = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] - b[2])];
+            for k in 0..3 {
+                assert!((y[i * 3 + k] - want[k]).abs() <= 1e-12 * (1.0 + want[k].abs()), "f64 sample {i} output {k}");
+                let e = (y32[i * 3 + k] as f64 - want[k]).abs();
+                assert!(
+                    e <= 1e-4 * (1.0 + want[k].abs()),
+                    "f32 sample {i} output {k}: {} vs {}",
+                    y32[i * 3 + k],
+                    want[k]
+                );
+            }
+            // exactly symmetric: the prediction at M x is S ŷ(x)
+            let mut ym = [0.0; 3];
+            m.predict(&mx, &mut ym).expect("sizes match");
+            assert!((ym[0] - y[i * 3]).abs() <= 1e-12 * (1.0 + ym[0].abs()));
+            assert!((ym[2] + y[i * 3 + 2]).abs() <= 1e-12 * (1.0 + ym[2].abs()));
+        }
+        // a tile's lanes stay independent with the mirror too
+        let mut par = vec![0.0f32; n * 3];
+        m.forward_batch_par(&x32, &mut par).expect("sizes match");
+        assert!(par.iter().zip(&y32).all(|(a, b)| a.to_bits() == b.to_bits()));
+        // a mirror that does not fit the sizes is refused
+        let e = plain
+            .with_mirror(Some(Mirror { swap: vec![(3, 6)], reflect: vec![], negate: vec![] }))
+            .expect_err("input 6");
+        assert!(e.to_string().contains("mirror"), "{e}");
+        let e = Mirror { swap: vec![(1, 2)], reflect: vec![(2, 1.0)], negate: vec![3] }
+            .validate(6, 3)
+            .expect_err("output 3");
+        assert!(e.to_string().contains("negate"), "{e}");
+        assert!(Mirror { swap: vec![(1, 2), (2, 3)], reflect: vec![], negate: vec![] }.validate(6, 3).is_err());
+        assert!(Mirror { swap: vec![], reflect: vec![(5, f64::NAN)], negate: vec![] }.validate(6, 3).is_err());
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //!   standardisation and output scaling stored with the weights), a batched f32 forward pass for
 //!   inference and an f64 path for training.
 //! - [`train`]: backpropagation of the mean squared error, Adam with a cosine learning-rate
-//!   schedule, seeded mini-batches, He initialisation, best weights on a validation split.
+//!   schedule, seeded mini-batches, He initialisation, best weights on a validation split (by
+//!   shape), optional per-output loss weights, mirror augmentation or mirror-averaged networks
+//!   ([`mlp::Mirror`]: the platelet mirrored about its x axis), full-batch L-BFGS refinement.
 //! - [`data`]: data sets, the seeded 80/20 split and the error metrics of the paper's Table 1
 //!   ([`TrainingReport`]).
 //! - [`safetensors`]: weights on disk in the safetensors format, validated on load.

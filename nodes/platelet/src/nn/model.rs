@@ -8,7 +8,8 @@
 //!
 //! **Networks.** N: (Lx, Ly, Lz \[µm\], α_top, α_bot, ψ \[rad\]) → (d, l, t_p); N_r and N_s:
 //! (Lx, Ly, Lz \[µm\], α_top, α_bot) → t_r and t_s. ψ is reduced to [0, 2π), the range of the
-//! training data (eq 14).
+//! training data (eq 14). A network stored with a mirror ([`super::mlp::Mirror`], the shipped
+//! ones) predicts the average over the platelet and its mirror image, at twice the cost.
 //!
 //! **Eq 18** ([`unscale_translational`], [`scale_translational`]): D = (70 − 10 cos 2ψ) d,
 //! L = 10 sin 2ψ · l, T = 2 cos ψ · t_p, T_r = 800 t_r, in paper units at |δv| = 1 µm/s and

@@ -11,7 +11,9 @@
 //! `layers.{l}.weight` (shape \[n_{l+1}, n_l\], PyTorch's `Linear` layout), `layers.{l}.bias`,
 //! `input.mean`, `input.std`, `output.mean`, `output.scale` (F64, so a round trip is exact; F32
 //! files, e.g. from PyTorch, load too) and the metadata `format` = `sonoflow-mlp`, `version` =
-//! `1`, `sizes` (e.g. `6,50,20,20,3`), `activation` = `relu`, plus any caller entries.
+//! `1`, `sizes` (e.g. `6,50,20,20,3`), `activation` = `relu`, for a mirror-averaged network
+//! `mirror` (the [`super::mlp::Mirror`] as JSON, e.g. `{"swap":[[3,4]],"reflect":[[5,6.283185307179586]],"negate":[2]}`),
+//! plus any caller entries.
 
 use super::mlp::Mlp;
 use super::NnError;
@@ -237,16 +239,33 @@ impl Mlp {
             m.insert(k.to_string(), v.to_string());
         }
         let sizes: Vec<String> = self.sizes().iter().map(ToString::to_string).collect();
-        for (k, v) in
-            [("format", "sonoflow-mlp"), ("version", "1"), ("activation", "relu"), ("sizes", &sizes.join(","))]
-        {
-            if m.insert(k.to_string(), v.to_string()).is_some() {
+        let mirror = match self.mirror() {
+            Some(mr) => serde_json::to_string(mr).map_err(|e| NnError::Config {
+                field: "mirror",
+                value: e.to_string(),
+                allowed: "a serialisable mirror",
+            })?,
+            None => String::new(),
+        };
+        // "mirror" is reserved whether or not this network has one
+        let reserved = [
+            ("format", "sonoflow-mlp".to_string()),
+            ("version", "1".to_string()),
+            ("activation", "relu".to_string()),
+            ("sizes", sizes.join(",")),
+            ("mirror", mirror),
+        ];
+        for (k, v) in reserved {
+            if m.insert(k.to_string(), v).is_some() {
                 return Err(NnError::Config {
                     field: "metadata",
                     value: k.to_string(),
-                    allowed: "keys other than format, version, activation, sizes",
+                    allowed: "keys other than format, version, activation, sizes, mirror",
                 });
             }
+        }
+        if self.mirror().is_none() {
+            m.remove("mirror");
         }
         Ok((t, m))
     }
@@ -320,7 +339,16 @@ impl Mlp {
         if !extra.is_empty() {
             return Err(format(format!("unexpected tensors {extra:?} for sizes {sizes_s}")));
         }
-        Mlp::from_parts(sizes, w, b, im, is, om, os).map_err(|e| format(e.to_string()))
+        let mirror = match meta("mirror") {
+            Some(text) => Some(
+                serde_json::from_str::<super::mlp::Mirror>(text)
+                    .map_err(|e| format(format!("metadata mirror = `{text}`: {e}")))?,
+            ),
+            None => None,
+        };
+        Mlp::from_parts(sizes, w, b, im, is, om, os)
+            .and_then(|net| net.with_mirror(mirror))
+            .map_err(|e| format(e.to_string()))
     }
 
     /// Writes the network to a safetensors file with `extra` metadata.
@@ -397,6 +425,30 @@ mod tests {
         let n = u64::from_le_bytes(raw[..8].try_into().expect("8 bytes")) as usize;
         assert_eq!(n % 8, 0);
         assert_eq!(raw.len() - 8 - n, 8 * (a.n_parameters() + 2 * 5 + 2));
+    }
+
+    #[test]
+    fn a_mirror_averaged_network_keeps_its_mirror_through_a_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let p = dir.path().join("n_r.safetensors");
+        let a = net().with_mirror(Some(super::super::mlp::Mirror::platelet_shape())).expect("fits");
+        a.save(&p, &[("outputs", "t_r")]).expect("writable");
+        let (b, meta) = Mlp::load(&p).expect("valid file");
+        assert_eq!(a, b);
+        assert!(meta.get("mirror").is_some_and(|m| m.contains("swap")), "{meta:?}");
+        // plain networks have no mirror entry; callers may not set one
+        let (_, m) = net().to_tensors(&[]).expect("valid");
+        assert!(!m.contains_key("mirror"));
+        let e = net().to_tensors(&[("mirror", "x")]).expect_err("reserved");
+        assert!(e.to_string().contains("mirror"), "{e}");
+        // a bad mirror entry names itself
+        let (t, mut m) = a.to_tensors(&[]).expect("valid");
+        m.insert("mirror".into(), r#"{"swap":[[3,7]],"reflect":[],"negate":[]}"#.into());
+        let e = load(&write_bytes(&t, &m).expect("valid")).expect_err("input 7 of 5");
+        assert!(e.to_string().contains("mirror"), "{e}");
+        m.insert("mirror".into(), "not json".into());
+        let e = load(&write_bytes(&t, &m).expect("valid")).expect_err("not json");
+        assert!(e.to_string().contains("metadata mirror"), "{e}");
     }
 
     #[test]

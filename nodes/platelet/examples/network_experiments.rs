@@ -1,0 +1,80 @@
+//! One training run of a platelet network on the shipped data with a given [`TrainConfig`], and
+//! its errors on the training, validation, test and generalisation samples (the measure of the
+//! training report, in %): the harness of the pitching-torque study (README, "Networks").
+//! Recipes are chosen on the validation samples (part of the training shapes), never on the test
+//! shapes.
+//!
+//! `cargo run --release -p sonoflow-platelet --example network_experiments -- \
+//!     [n|n_r|n_s] ['{"epochs": 800, "patience": 0, "refine_iterations": 500, ...}'] [data.jsonl] [angles]`
+//!
+//! The JSON is a `TrainConfig` (missing fields: defaults); `augment_mirror` / `average_mirror`
+//! without a `mirror` use the platelet's ([`Mirror::platelet_n`] for N, [`Mirror::platelet_shape`]
+//! for N_r and N_s).
+
+use sonoflow_platelet::dataset::{self, NetworkData};
+use sonoflow_platelet::nn::mlp::Mirror;
+use sonoflow_platelet::nn::train::{train, validation_indices, TrainConfig};
+use sonoflow_platelet::nn::{evaluate, Dataset};
+use std::time::Instant;
+
+fn fail(msg: String) -> ! {
+    eprintln!("network_experiments: {msg}");
+    std::process::exit(1)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let which = args.first().map_or("n", String::as_str).to_string();
+    let mut cfg: TrainConfig = match args.get(1) {
+        Some(j) => serde_json::from_str(j).unwrap_or_else(|e| fail(format!("config `{j}`: {e}"))),
+        None => TrainConfig::default(),
+    };
+    let path = args.get(2).cloned().unwrap_or_else(|| "nodes/platelet/data/stokes-data.jsonl".into());
+    let angles: usize = match args.get(3).map(|a| a.parse()) {
+        None => 4,
+        Some(Ok(a)) => a,
+        Some(Err(e)) => fail(format!("angles: {e}")),
+    };
+    let (sizes, pick, outputs): (Vec<usize>, fn(&NetworkData) -> &Dataset, Vec<&str>) = match which.as_str() {
+        "n" => (vec![6, 50, 20, 20, 3], |d| &d.n, vec!["d", "l", "t_p"]),
+        "n_r" => (vec![5, 20, 20, 20, 1], |d| &d.n_r, vec!["t_r"]),
+        "n_s" => (vec![5, 20, 20, 20, 1], |d| &d.n_s, vec!["t_s"]),
+        w => fail(format!("network `{w}`: expected n, n_r or n_s")),
+    };
+    if (cfg.augment_mirror || cfg.average_mirror) && cfg.mirror.is_none() {
+        cfg.mirror = Some(if which == "n" { Mirror::platelet_n() } else { Mirror::platelet_shape() });
+    }
+    let records = dataset::load(std::path::Path::new(&path)).unwrap_or_else(|e| fail(e.to_string()));
+    let (training, test) = dataset::split_by_shape(&records, 0.2, 1).unwrap_or_else(|e| fail(e.to_string()));
+    let gen: Vec<_> = records.iter().filter(|r| r.set == dataset::Set::Generalisation).collect();
+    // the angles are drawn from the tool's seed (1), as `sonoflow platelet train --seed 1` does
+    let dtr = dataset::network_datasets(&training, angles, 1).unwrap_or_else(|e| fail(e.to_string()));
+    let dte = dataset::network_datasets(&test, 4, 1).unwrap_or_else(|e| fail(e.to_string()));
+    let dg = dataset::network_datasets(&gen, 4, 1).unwrap_or_else(|e| fail(e.to_string()));
+    let t0 = Instant::now();
+    let (net, outcome) = train(&sizes, pick(&dtr), &cfg).unwrap_or_else(|e| fail(e.to_string()));
+    let secs = t0.elapsed().as_secs_f64();
+    let val = pick(&dtr).subset(&validation_indices(pick(&dtr), &cfg));
+    println!(
+        "{which} {}: {secs:.1} s, {} epochs (best {}), refine {} (best {}), validation loss {:.3e}",
+        serde_json::to_string(&cfg).unwrap_or_default(),
+        outcome.epochs_run,
+        outcome.best_epoch,
+        outcome.refine_iterations_run,
+        outcome.refine_best_iteration,
+        outcome.best_validation_loss
+    );
+    let sets: [(&str, &Dataset); 4] =
+        [("training", pick(&dtr)), ("validation", &val), ("test", pick(&dte)), ("generalisation", pick(&dg))];
+    for (k, name) in outputs.iter().enumerate() {
+        let mut line = format!("  {name:4}");
+        for (set, d) in &sets {
+            let e = evaluate(&net, d).unwrap_or_else(|e| fail(e.to_string()))[k];
+            line.push_str(&format!(
+                " | {set} rms {:.3}/{:.2} rel {:.3}/{:.2}",
+                e.mean_rms_pct, e.max_rms_pct, e.mean_rel_pct, e.max_rel_pct
+            ));
+        }
+        println!("{line}");
+    }
+}
