@@ -35,7 +35,8 @@ fn main() {
         Some(Ok(a)) => a,
         Some(Err(e)) => fail(format!("angles: {e}")),
     };
-    let (sizes, pick, outputs): (Vec<usize>, fn(&NetworkData) -> &Dataset, Vec<&str>) = match which.as_str() {
+    type Pick = fn(&NetworkData) -> &Dataset;
+    let (sizes, pick, outputs): (Vec<usize>, Pick, Vec<&str>) = match which.as_str() {
         "n" => (vec![6, 50, 20, 20, 3], |d| &d.n, vec!["d", "l", "t_p"]),
         "n_r" => (vec![5, 20, 20, 20, 1], |d| &d.n_r, vec!["t_r"]),
         "n_s" => (vec![5, 20, 20, 20, 1], |d| &d.n_s, vec!["t_s"]),

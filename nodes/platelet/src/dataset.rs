@@ -331,11 +331,11 @@ pub fn load(path: &Path) -> Result<Vec<Record>, DataError> {
 /// (at least one, at most n − 1) are test shapes. By shape, not by sample: a shape's angles of
 /// attack are exact combinations of the same solves, so a test shape must never be seen in
 /// training. `sonoflow platelet train` and the experiments use this one split.
-pub fn split_by_shape<'a>(
-    records: &'a [Record],
+pub fn split_by_shape(
+    records: &[Record],
     test_fraction: f64,
     seed: u64,
-) -> Result<(Vec<&'a Record>, Vec<&'a Record>), DataError> {
+) -> Result<(Vec<&Record>, Vec<&Record>), DataError> {
     if !(test_fraction > 0.0 && test_fraction < 1.0) {
         return Err(DataError::Option {
             field: "test_fraction",

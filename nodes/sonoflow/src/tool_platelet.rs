@@ -267,7 +267,9 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
     let mut reports: Vec<TrainingReport> = Vec::new();
     let mut nets = Vec::new();
     type Pick = fn(&dataset::NetworkData) -> &sonoflow_platelet::nn::data::Dataset;
-    let nets_spec: [(&str, Vec<usize>, Vec<&str>, Pick, &TrainConfig); 3] = [
+    /// Name, layer sizes, output names, its data, its training configuration.
+    type NetSpec<'a> = (&'a str, Vec<usize>, Vec<&'a str>, Pick, &'a TrainConfig);
+    let nets_spec: [NetSpec; 3] = [
         ("N", vec![6, 50, 20, 20, 3], vec!["drag d", "lift l", "pitching torque t_p"], |d| &d.n, &n_cfg),
         ("N_r", vec![5, 20, 20, 20, 1], vec!["rotational torque t_r"], |d| &d.n_r, &shape_cfg),
         ("N_s", vec![5, 20, 20, 20, 1], vec!["strain torque t_s"], |d| &d.n_s, &shape_cfg),

@@ -269,8 +269,7 @@ fn backprop(net: &Mlp, acts: &[Vec<f64>], delta: &mut Vec<f64>, next: &mut Vec<f
     for l in (0..net.n_layers()).rev() {
         let (n_in, n_out) = (sizes[l], sizes[l + 1]);
         let a_prev = &acts[l];
-        for o in 0..n_out {
-            let d = delta[o];
+        for (o, &d) in delta.iter().enumerate().take(n_out) {
             g.b[l][o] += d;
             for (gw, a) in g.w[l][o * n_in..(o + 1) * n_in].iter_mut().zip(a_prev) {
                 *gw += d * a;
@@ -280,8 +279,7 @@ fn backprop(net: &Mlp, acts: &[Vec<f64>], delta: &mut Vec<f64>, next: &mut Vec<f
             // δ_{l−1} = (W_lᵀ δ_l) ⊙ ReLU'(z_{l−1}); a > 0 exactly where z > 0
             next.clear();
             next.resize(n_in, 0.0);
-            for o in 0..n_out {
-                let d = delta[o];
+            for (o, &d) in delta.iter().enumerate().take(n_out) {
                 for (nx, w) in next.iter_mut().zip(&net.weights[l][o * n_in..(o + 1) * n_in]) {
                     *nx += w * d;
                 }
@@ -307,8 +305,8 @@ fn sample_loss(net: &Mlp, d: &Samples, i: usize, s: &mut Scratch, g: Option<&mut
     if d.average {
         net.forward_raw_f64(xm, &mut s.acts_m);
         s.delta_m.clear();
-        for k in 0..d.n_out {
-            let e = 0.5 * (s.acts[last][k] + d.sign[k] * s.acts_m[last][k]) - t[k];
+        for (k, &tk) in t.iter().enumerate().take(d.n_out) {
+            let e = 0.5 * (s.acts[last][k] + d.sign[k] * s.acts_m[last][k]) - tk;
             sq += d.w[k] * e * e;
             s.delta.push(0.5 * d.w[k] * e);
             s.delta_m.push(0.5 * d.sign[k] * d.w[k] * e);
@@ -318,8 +316,8 @@ fn sample_loss(net: &Mlp, d: &Samples, i: usize, s: &mut Scratch, g: Option<&mut
             backprop(net, &s.acts_m, &mut s.delta_m, &mut s.next, g);
         }
     } else {
-        for k in 0..d.n_out {
-            let e = s.acts[last][k] - t[k];
+        for (k, &tk) in t.iter().enumerate().take(d.n_out) {
+            let e = s.acts[last][k] - tk;
             sq += d.w[k] * e * e;
             s.delta.push(d.w[k] * e);
         }
