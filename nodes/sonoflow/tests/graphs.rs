@@ -423,8 +423,7 @@ fn quickstart_chain_measures_the_vessel_velocity() {
             let expect = sonoflow::evaluate::field_error(
                 (&tv[..n], &tv[n..2 * n], &tv[2 * n..3 * n]),
                 (&est[..n], &est[n..2 * n], flags),
-                nx,
-                nz,
+                sonoflow::evaluate::PixelGrid { nx, nz, dx: th.grid.dx, dz: th.grid.dz },
                 2,
             );
             assert_eq!(ev.packets[0].fields[name], expect, "{name}");
