@@ -68,6 +68,10 @@ pub struct Point {
     /// Mean over packets of |e|75 of x and z (fractions of v_max).
     pub x_abs_p75: f64,
     pub z_abs_p75: f64,
+    /// Mean over packets of the gain of vx and vz (slope of the estimate against the truth; NaN
+    /// where a true component is zero).
+    pub x_gain: f64,
+    pub z_gain: f64,
     pub pareto: bool,
 }
 
@@ -228,6 +232,8 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<i32> {
             error_rms: f64::NAN,
             x_abs_p75: f64::NAN,
             z_abs_p75: f64::NAN,
+            x_gain: f64::NAN,
+            z_gain: f64::NAN,
             pareto: false,
         };
         if let Ok(r) = read_json(&dir.join("report.json")) {
@@ -251,6 +257,8 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<i32> {
                     p.error_rms = mean(&|v| num(&v["x"]["rms"]).hypot(num(&v["z"]["rms"])));
                     p.x_abs_p75 = mean(&|v| num(&v["x"]["abs_p75"]));
                     p.z_abs_p75 = mean(&|v| num(&v["z"]["abs_p75"]));
+                    p.x_gain = mean(&|v| num(&v["gain_x"]));
+                    p.z_gain = mean(&|v| num(&v["gain_z"]));
                 } else if p.status == "ok" {
                     p.status = format!("no `{}` field evaluated", a.field);
                 }
@@ -269,11 +277,12 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<i32> {
         points.push(p);
     }
     mark_pareto(&mut points);
-    let mut csv = String::from("index,settings,status,compute_s,wall_s,error_rms,x_abs_p75,z_abs_p75,pareto\n");
+    let mut csv =
+        String::from("index,settings,status,compute_s,wall_s,error_rms,x_abs_p75,z_abs_p75,x_gain,z_gain,pareto\n");
     for p in &points {
         let _ = writeln!(
             csv,
-            "{},\"{}\",\"{}\",{},{},{},{},{},{}",
+            "{},\"{}\",\"{}\",{},{},{},{},{},{},{},{}",
             p.index,
             p.settings.join("; ").replace('"', "\"\""),
             p.status.replace('"', "\"\""),
@@ -282,6 +291,8 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<i32> {
             p.error_rms,
             p.x_abs_p75,
             p.z_abs_p75,
+            p.x_gain,
+            p.z_gain,
             p.pareto
         );
     }
@@ -339,6 +350,8 @@ mod tests {
             error_rms: e,
             x_abs_p75: e,
             z_abs_p75: e,
+            x_gain: 1.0,
+            z_gain: 1.0,
             pareto: false,
         }
     }

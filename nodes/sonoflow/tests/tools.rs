@@ -203,6 +203,9 @@ fn sweep_runs_each_point_and_reports_error_against_time() {
         assert!((got - expect).abs() < 1e-12, "{got} vs {expect}");
         let compute: f64 = cols[3].parse().unwrap();
         assert!(compute > 0.0);
+        // and the gains (slope of the estimate against the truth) beside them
+        let gx: f64 = cols[8].parse().unwrap();
+        assert_eq!(Some(gx), f.gain_x, "{row}");
     }
     assert!(rows.iter().any(|r| r.ends_with(",true")), "at least one Pareto point: {csv}");
     let svg = std::fs::read_to_string(dir.path().join("sweep.svg")).unwrap();
