@@ -102,6 +102,8 @@ mod params;
 pub mod robust;
 mod smoothn;
 
-pub use crate::divfree::{DivFree, DivFreeError, DivFreeParams, DivFreeReport, Selection};
+pub use crate::divfree::{
+    wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,
+};
 pub use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};
 pub use crate::smoothn::{smoothn, Smoothn, SmoothnReport, OUTLIER_WEIGHT};

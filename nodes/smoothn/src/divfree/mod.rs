@@ -54,6 +54,14 @@
 //!   weights of the studentised residual norm `‖((vx − ux)/r, vz − uz) − median‖ / (1.4826 MAD √(1 − h̄))`
 //!   (per-component medians; MAD = median of those norms; h̄ = tr H / n).
 //!
+//! * **No-slip wall** (optional, [`DivFree::fit_with_wall`], [`wall_from_power`]): pixels outside
+//!   the lumen (where the smoothed Doppler power falls below the blood's level by a threshold)
+//!   get a zero-velocity prior of fixed weight. It is not data: the noise ratio, the robust
+//!   weights and the cross-validation score use the measured pixels only, and every
+//!   cross-validation fold keeps the whole prior. Without it the fit extrapolates the blurred
+//!   near-wall Doppler (which over-reads: the resolution cell there averages only the faster
+//!   interior) across the wall.
+//!
 //! No IPC: the `regulariser` node calls it (`method = "divergence-free"`).
 
 use faer::linalg::solvers::Solve;
@@ -65,7 +73,9 @@ use serde::{Deserialize, Serialize};
 use crate::WeightFunction;
 
 mod select;
+mod wall;
 use select::{bracket_min, BlockCv};
+pub use wall::{wall_from_power, NoSlipParams};
 
 /// Parameters of [`DivFree`]. Every field has a default; unknown fields are rejected.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -453,6 +463,24 @@ impl DivFree {
         vx: &mut [f64],
         vz: &mut [f64],
     ) -> Result<DivFreeReport, DivFreeError> {
+        self.fit_with_wall(ux, uz, weights, None, params, s_hint, vx, vz)
+    }
+
+    /// [`DivFree::fit_warm`] with a no-slip prior: `wall` (per pixel, finite, ≥ 0, relative to the
+    /// largest data weight) pulls the velocity to zero there (module doc). Give the wall pixels
+    /// weight 0 in `weights` (their Doppler is not blood flow).
+    #[allow(clippy::too_many_arguments)]
+    pub fn fit_with_wall(
+        &self,
+        ux: &[f64],
+        uz: &[f64],
+        weights: Option<&[f64]>,
+        wall: Option<&[f64]>,
+        params: &DivFreeParams,
+        s_hint: Option<f64>,
+        vx: &mut [f64],
+        vz: &mut [f64],
+    ) -> Result<DivFreeReport, DivFreeError> {
         validate(params)?;
         if params.order != self.order {
             return Err(DivFreeError::InvalidParameter {
@@ -483,6 +511,17 @@ impl DivFree {
                 });
             }
         }
+        if let Some(w) = wall {
+            len("wall", w.len())?;
+            if let Some(bad) = w.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                return Err(DivFreeError::InvalidParameter {
+                    field: "wall",
+                    value: format!("{bad}"),
+                    allowed: "finite values ≥ 0",
+                });
+            }
+        }
+        let prior: Vec<f64> = wall.map(<[f64]>::to_vec).unwrap_or_else(|| vec![0.0; n]);
         // Base weights: given weights (normalised by their maximum), 0 where data are missing.
         let wmax = weights.map(|w| w.iter().cloned().fold(0.0, f64::max)).unwrap_or(1.0);
         let base: Vec<f64> = (0..n)
@@ -513,7 +552,7 @@ impl DivFree {
         let mut psi = vec![0.0; self.n_psi];
         let mut s_used = params.s;
         for pass in 0..passes {
-            let data_vals = self.data_matrix(&w, r2);
+            let data_vals = self.data_matrix(&with_prior(&w, &prior), r2);
             let mut rhs = vec![0.0; self.n_psi];
             let wx: Vec<f64> = (0..n).map(|p| w[p] * ux0[p]).collect();
             let wz: Vec<f64> = (0..n).map(|p| w[p] * uz0[p]).collect();
@@ -527,7 +566,7 @@ impl DivFree {
                     let hint = s_hint.filter(|h| h.is_finite() && *h > 0.0).map(f64::log10).unwrap_or(1.0);
                     let best = match params.selection {
                         Selection::BlockCv if BlockCv::possible(self, &w, params.cv_block) => {
-                            let cv = BlockCv::new(self, &w, &ux0, &uz0, r2, params.cv_block);
+                            let cv = BlockCv::new(self, &w, &prior, &ux0, &uz0, r2, params.cv_block);
                             bracket_min(hint, |ls| cv.score(self, 10f64.powf(ls), &mut report))?
                         }
                         // Block CV needs data outside every fold (grid or data region smaller
@@ -680,6 +719,12 @@ impl DivFree {
         }
         (a / b).clamp(0.1, 100.0)
     }
+}
+
+/// Data weights plus the zero-velocity prior (for the normal matrix only: the prior's right-hand
+/// side is zero).
+fn with_prior(w: &[f64], prior: &[f64]) -> Vec<f64> {
+    w.iter().zip(prior).map(|(a, b)| a + b).collect()
 }
 
 /// Column pattern view used for accumulation.

@@ -1,7 +1,7 @@
 //! Choice of the smoothing parameter S of the divergence-free fit: four-fold block
 //! cross-validation and the bracketing search over log10 S.
 
-use super::{solve, DivFree, DivFreeError, DivFreeReport};
+use super::{solve, with_prior, DivFree, DivFreeError, DivFreeReport};
 
 /// Four-fold cross-validation over square blocks of `block` pixels (fold of pixel (i, j):
 /// `2·((i / block) mod 2) + (j / block) mod 2`): each fold is fitted without its blocks and scored
@@ -33,7 +33,8 @@ impl BlockCv {
         per_fold.iter().all(|&k| k == 0 || k < total) && per_fold.iter().filter(|&&k| k > 0).count() >= 2
     }
 
-    pub(super) fn new(f: &DivFree, w: &[f64], ux: &[f64], uz: &[f64], r2: f64, block: usize) -> Self {
+    /// Folds of the data weights `w`; the zero-velocity `prior` stays whole in every fold.
+    pub(super) fn new(f: &DivFree, w: &[f64], prior: &[f64], ux: &[f64], uz: &[f64], r2: f64, block: usize) -> Self {
         let (nz, nx) = (f.nz, f.nx);
         let b = block.max(1);
         let mut folds = Vec::with_capacity(4);
@@ -56,7 +57,7 @@ impl BlockCv {
             let ax: Vec<f64> = (0..nz * nx).map(|p| wk[p] * ux[p]).collect();
             let az: Vec<f64> = (0..nz * nx).map(|p| wk[p] * uz[p]).collect();
             f.adjoint(&ax, &az, r2, &mut rhs);
-            folds.push((f.data_matrix(&wk, r2), rhs));
+            folds.push((f.data_matrix(&with_prior(&wk, prior), r2), rhs));
             held.push(h);
         }
         Self { folds, held, w: w.to_vec(), ux: ux.to_vec(), uz: uz.to_vec() }
