@@ -120,6 +120,14 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             df_s_bounds,
         ),
+        c(
+            "divfree-no-slip-extremes",
+            "no-slip wall from a power plane that is NaN, negative or zero everywhere (no wall may come out), and \
+             the largest prior weight (100) on every pixel outside a noisy channel; check: no wall from degenerate \
+             power, the fit finite and divergence-free to 1e-12, the channel's centre speed within 5 % of u0",
+            Expected::Pass,
+            df_no_slip,
+        ),
     ]
 }
 
@@ -433,4 +441,31 @@ fn negative_weight(_: &Ctx) -> CaseResult {
     smoothn(&[0.0; 12], &[3, 4], 1, Some(&w), &SmoothnParams::default())
         .map(|_| Check::new(true, "accepted a negative weight"))
         .msg()
+}
+
+fn df_no_slip(_: &Ctx) -> CaseResult {
+    use sonoflow_smoothn::{wall_from_power, NoSlipParams};
+    let (nz, nx) = (24, 32);
+    let n = nz * nx;
+    let mut parts = vec![];
+    let mut ok = true;
+    for (name, v) in [("NaN", f64::NAN), ("negative", -1.0), ("zero", 0.0)] {
+        let wall =
+            wall_from_power(&vec![v; n], &vec![true; n], [nz, nx], [2e-4, 2e-4], &NoSlipParams::default()).msg()?;
+        let k = wall.iter().filter(|w| **w).count();
+        ok &= k == 0;
+        parts.push(format!("{name} power: {k} wall pixels"));
+    }
+    let (ux, uz, _, _, m) = df_channel(nz, nx, 35)?;
+    let prior: Vec<f64> = m.iter().map(|v| if *v > 0.0 { 0.0 } else { 100.0 }).collect();
+    let f = DivFree::new([nz, nx], [2e-4, 2e-4], 3).msg()?;
+    let (mut vx, mut vz) = (vec![0.0; n], vec![0.0; n]);
+    f.fit_with_wall(&ux, &uz, Some(&m), Some(&prior), &DivFreeParams::default(), None, &mut vx, &mut vz).msg()?;
+    let fin = vx.iter().chain(&vz).all(|v| v.is_finite());
+    let div = max_div(&vx, &vz, [nz, nx]);
+    let centre = vx[(nz / 2) * nx + nx / 2];
+    let err = ((centre - 0.5) / 0.5).abs();
+    ok &= fin && div < 1e-12 && err < 0.05;
+    parts.push(format!("prior 100 outside: finite {fin}, divergence {div:.1e}, centre {centre:.4} m/s"));
+    Ok(Check::new(ok, parts.join("; ")))
 }
