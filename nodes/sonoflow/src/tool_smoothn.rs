@@ -6,7 +6,9 @@
 //! values and are filled. `--divergence-free` fits a stream function instead (a `(2, nz, nx)`
 //! field: vx then vz, rows along z; `sonoflow_smoothn::divfree`).
 
-use sonoflow_smoothn::{DivFree, DivFreeParams, Flavour, Smoothn, SmoothnParams, WeightFunction};
+use sonoflow_smoothn::{
+    wall_from_power, DivFree, DivFreeParams, Flavour, NoSlipParams, Smoothn, SmoothnParams, WeightFunction,
+};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `sonoflow smoothn`.
@@ -58,6 +60,20 @@ pub struct SmoothnArgs {
     /// Divergence-free fit: block size of the cross-validation folds, pixels (2 ..= 4096).
     #[arg(long, default_value_t = 16)]
     pub cv_block: usize,
+    /// Divergence-free fit: no-slip wall from the Doppler power `--power` (as the regulariser
+    /// node's `no_slip`): pixels whose smoothed power is `--no-slip-db` below the blood's median
+    /// get a zero-velocity prior of `--no-slip-weight`.
+    #[arg(long)]
+    pub no_slip: bool,
+    /// Doppler power `.npy` of the grid's shape (for `--no-slip`).
+    #[arg(long)]
+    pub power: Option<PathBuf>,
+    /// `--no-slip` threshold (dB below the blood's median power, −30 ..= −1).
+    #[arg(long, allow_hyphen_values = true, default_value_t = NoSlipParams::default().threshold_db)]
+    pub no_slip_db: f64,
+    /// `--no-slip` prior weight relative to the largest data weight (0 < w ≤ 100).
+    #[arg(long, default_value_t = NoSlipParams::default().weight)]
+    pub no_slip_weight: f64,
 }
 
 /// Splits an array shape into (grid shape, components).
@@ -102,20 +118,48 @@ fn run_divergence_free(a: &SmoothnArgs, weight_function: WeightFunction) -> anyh
     };
     params.validate()?;
     let n = nz * nx;
-    let weights = match &a.weights {
-        Some(p) => {
-            let w = crate::npy::read(p)?;
-            if w.shape != [nz, nx] {
-                anyhow::bail!("--weights {}: shape {:?}, expected the grid shape [{nz}, {nx}]", p.display(), w.shape);
-            }
-            Some(w.data)
+    let grid_file = |flag: &str, p: &PathBuf| -> anyhow::Result<Vec<f64>> {
+        let w = crate::npy::read(p)?;
+        if w.shape != [nz, nx] {
+            anyhow::bail!("--{flag} {}: shape {:?}, expected the grid shape [{nz}, {nx}]", p.display(), w.shape);
         }
-        None => None,
+        Ok(w.data)
+    };
+    let mut weights = a.weights.as_ref().map(|p| grid_file("weights", p)).transpose()?;
+    // no-slip wall: the wall pixels' Doppler is dropped, a zero-velocity prior takes its place
+    let ns = NoSlipParams { threshold_db: a.no_slip_db, weight: a.no_slip_weight, ..Default::default() };
+    let prior = match (a.no_slip, &a.power) {
+        (false, None) => None,
+        (false, Some(_)) => anyhow::bail!("--power is only used with --no-slip"),
+        (true, None) => anyhow::bail!("--no-slip needs --power (the Doppler power, grid shape [{nz}, {nx}])"),
+        (true, Some(p)) => {
+            let power = grid_file("power", p)?;
+            let w = weights.get_or_insert_with(|| vec![1.0; n]);
+            let blood: Vec<bool> =
+                (0..n).map(|i| w[i] > 0.0 && arr.data[i].is_finite() && arr.data[n + i].is_finite()).collect();
+            let wall = wall_from_power(&power, &blood, [nz, nx], spacing, &ns)
+                .map_err(|e| anyhow::anyhow!("--no-slip-db / --no-slip-weight / --spacing: {e}"))?;
+            for (wi, out) in w.iter_mut().zip(&wall) {
+                if *out {
+                    *wi = 0.0;
+                }
+            }
+            Some(wall.iter().map(|out| if *out { ns.weight } else { 0.0 }).collect::<Vec<f64>>())
+        }
     };
     let start = std::time::Instant::now();
     let f = DivFree::new([nz, nx], spacing, a.order)?;
     let (mut vx, mut vz) = (vec![0.0; n], vec![0.0; n]);
-    let report = f.fit(&arr.data[..n], &arr.data[n..], weights.as_deref(), &params, &mut vx, &mut vz)?;
+    let report = f.fit_with_wall(
+        &arr.data[..n],
+        &arr.data[n..],
+        weights.as_deref(),
+        prior.as_deref(),
+        &params,
+        None,
+        &mut vx,
+        &mut vz,
+    )?;
     let secs = start.elapsed().as_secs_f64();
     vx.extend_from_slice(&vz);
     crate::npy::write_f64(&a.out, &arr.shape, &vx)?;
@@ -125,6 +169,8 @@ fn run_divergence_free(a: &SmoothnArgs, weight_function: WeightFunction) -> anyh
         "grid": [nz, nx],
         "spacing": spacing,
         "params": params,
+        "no_slip": a.no_slip.then_some(&ns),
+        "wall_pixels": prior.as_ref().map(|p| p.iter().filter(|v| **v > 0.0).count()),
         "seconds": secs,
     });
     let side = a.out.with_extension("json");
@@ -148,6 +194,9 @@ pub fn run(a: &SmoothnArgs) -> anyhow::Result<i32> {
         let weight_function: WeightFunction =
             parse_enum("weight-function", &a.weight_function, "bisquare, cauchy, talworth")?;
         return run_divergence_free(a, weight_function);
+    }
+    if a.no_slip || a.power.is_some() {
+        anyhow::bail!("--no-slip and --power belong to --divergence-free");
     }
     let arr = crate::npy::read(&a.input)?;
     let (grid, components) = split_shape(&arr.shape, a.scalar)?;

@@ -132,6 +132,48 @@ fn smoothn_tool_divergence_free_matches_the_library() {
     assert!(stderr.contains("(2, nz, nx)"), "{stderr}");
 }
 
+/// `--divergence-free --no-slip --power`: exactly the library's wall and walled fit (as the
+/// regulariser node's `no_slip`); `--no-slip` without `--power`, or outside `--divergence-free`,
+/// is a clear error.
+#[test]
+fn smoothn_tool_no_slip_matches_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, noisy) = noisy_field();
+    // power: a bright band over rows 8 ..= 21 (the "lumen"), 20 dB down elsewhere
+    let power: Vec<f64> = (0..1200).map(|i| if (8..=21).contains(&(i / 40)) { 1.0 } else { 0.01 }).collect();
+    let (inp, pw, out) = (dir.path().join("field.npy"), dir.path().join("power.npy"), dir.path().join("ns.npy"));
+    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    npy::write_f64(&pw, &[30, 40], &power).unwrap();
+    let args = ["--in", inp.to_str().unwrap(), "--divergence-free", "--order", "3", "--robust", "--no-slip"];
+    let (code, _, stderr) = smoothn_cli(
+        &[&args[..], &["--power", pw.to_str().unwrap(), "--spacing", "2e-4,2e-4", "--out", out.to_str().unwrap()]]
+            .concat(),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let got = npy::read(&out).unwrap();
+    let ns = sonoflow_smoothn::NoSlipParams::default();
+    let blood: Vec<bool> = (0..1200).map(|i| noisy[i].is_finite() && noisy[1200 + i].is_finite()).collect();
+    let wall = sonoflow_smoothn::wall_from_power(&power, &blood, [30, 40], [2e-4, 2e-4], &ns).unwrap();
+    let n_wall = wall.iter().filter(|w| **w).count();
+    assert!(n_wall > 300 && n_wall < 1200 - 400, "{n_wall} wall pixels");
+    let w: Vec<f64> = wall.iter().map(|o| if *o { 0.0 } else { 1.0 }).collect();
+    let prior: Vec<f64> = wall.iter().map(|o| if *o { ns.weight } else { 0.0 }).collect();
+    let f = sonoflow_smoothn::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
+    let (mut vx, mut vz) = (vec![0.0; 1200], vec![0.0; 1200]);
+    let p = sonoflow_smoothn::DivFreeParams::default();
+    f.fit_with_wall(&noisy[..1200], &noisy[1200..], Some(&w), Some(&prior), &p, None, &mut vx, &mut vz).unwrap();
+    assert!(got.data[..1200] == vx[..] && got.data[1200..] == vz[..], "tool output differs from the library");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sonoflow::tool_smoothn::sidecar(&out)).unwrap()).unwrap();
+    assert_eq!(side["wall_pixels"].as_u64().unwrap() as usize, n_wall);
+    let (code, _, stderr) = smoothn_cli(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    assert_ne!(code, 0);
+    assert!(stderr.contains("--no-slip needs --power"), "{stderr}");
+    let (code, _, stderr) = smoothn_cli(&["--in", inp.to_str().unwrap(), "--no-slip", "--out", out.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("belong to --divergence-free"), "{stderr}");
+}
+
 #[test]
 fn smoothn_tool_rejects_bad_input_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
