@@ -501,21 +501,12 @@ impl DivFree {
         len("uz", uz.len())?;
         len("vx", vx.len())?;
         len("vz", vz.len())?;
-        if let Some(w) = weights {
-            len("weights", w.len())?;
+        for (field, w) in [("weights", weights), ("wall", wall)] {
+            let Some(w) = w else { continue };
+            len(field, w.len())?;
             if let Some(bad) = w.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
                 return Err(DivFreeError::InvalidParameter {
-                    field: "weights",
-                    value: format!("{bad}"),
-                    allowed: "finite values ≥ 0",
-                });
-            }
-        }
-        if let Some(w) = wall {
-            len("wall", w.len())?;
-            if let Some(bad) = w.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-                return Err(DivFreeError::InvalidParameter {
-                    field: "wall",
+                    field,
                     value: format!("{bad}"),
                     allowed: "finite values ≥ 0",
                 });
