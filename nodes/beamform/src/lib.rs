@@ -34,7 +34,7 @@ pub use error::{BeamformError, Result};
 pub use grid::Grid;
 pub use rf2iq::{to_element_major, to_sample_major, Layout, Rf2Iq, Rf2IqParams, RfSample, RfView};
 pub use rustfft::num_complex::Complex;
-pub use vector::{nominal_projection, solve_vector, Projection, VectorField, VectorInput};
+pub use vector::{nominal_projection, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput};
 
 /// Complex f32 sample (I/Q).
 pub type C32 = Complex<f32>;

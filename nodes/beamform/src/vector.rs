@@ -66,9 +66,21 @@ const MIN_REL_DET: f64 = 1e-6;
 
 /// Solves (vx, vz) for every pixel from `inputs` (all of the same length `n_pixels`).
 pub fn solve_vector(inputs: &[VectorInput<'_>], out: &mut VectorField) -> Result<()> {
+    solve_vector_weighted(inputs, &vec![1.0; inputs.len()], out)
+}
+
+/// [`solve_vector`] with one weight per Doppler map: the per-pixel normal equations
+/// `(Aᵀ W A) v = Aᵀ W v_D`. The weight of a map is the inverse of its noise variance (relative);
+/// e.g. maps demodulated at different frequencies `f` with equal phase noise have velocity noise
+/// ∝ 1/f: weights ∝ f². Equal weights give [`solve_vector`] exactly.
+pub fn solve_vector_weighted(inputs: &[VectorInput<'_>], weights: &[f64], out: &mut VectorField) -> Result<()> {
     let first = inputs.first().ok_or_else(|| invalid("vector inputs", 0, "at least two Doppler maps"))?;
     if inputs.len() < 2 {
         return Err(invalid("vector inputs", inputs.len(), "at least two Doppler maps"));
+    }
+    check_len("vector weights", weights.len(), inputs.len())?;
+    if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w > 0.0 && **w <= 1e12)) {
+        return Err(invalid("vector weights", w, "finite, in (0, 1e12]"));
     }
     let n = first.velocity.len();
     for inp in inputs {
@@ -100,7 +112,7 @@ pub fn solve_vector(inputs: &[VectorInput<'_>], out: &mut VectorField) -> Result
     for p in 0..n {
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
         let (mut used, mut fl) = (0usize, 0u8);
-        for (inp, nom) in inputs.iter().zip(&nominal) {
+        for ((inp, nom), &w) in inputs.iter().zip(&nominal).zip(weights) {
             let f = inp.flags[p];
             let v = f64::from(inp.velocity[p]);
             if f & flags::NO_ESTIMATE != 0 || !v.is_finite() {
@@ -110,11 +122,11 @@ pub fn solve_vector(inputs: &[VectorInput<'_>], out: &mut VectorField) -> Result
                 Projection::Nominal { .. } => *nom,
                 Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
             };
-            a11 += a[0] * a[0];
-            a12 += a[0] * a[1];
-            a22 += a[1] * a[1];
-            b1 += a[0] * v;
-            b2 += a[1] * v;
+            a11 += w * a[0] * a[0];
+            a12 += w * a[0] * a[1];
+            a22 += w * a[1] * a[1];
+            b1 += w * a[0] * v;
+            b2 += w * a[1] * v;
             used += 1;
             fl |= f & flags::ALIASING;
         }

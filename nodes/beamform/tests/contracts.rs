@@ -5,9 +5,9 @@ mod common;
 
 use common::paper_das;
 use sonoflow_beamform::{
-    flags, nominal_projection, solve_vector, BeamformError, ClutterFilter, DasParams, DasPlan, DopplerEstimator,
-    DopplerParams, Estimator, Grid, Packet, Projection, Rf2Iq, Rf2IqParams, RfView, TxWave, VectorField, VectorInput,
-    C32,
+    flags, nominal_projection, solve_vector, solve_vector_weighted, BeamformError, ClutterFilter, DasParams, DasPlan,
+    DopplerEstimator, DopplerParams, Estimator, Grid, Packet, Projection, Rf2Iq, Rf2IqParams, RfView, TxWave,
+    VectorField, VectorInput, C32,
 };
 
 fn field_of(e: BeamformError) -> String {
@@ -139,6 +139,44 @@ fn vector_solve_matches_eq20_and_steered_geometry() {
     ];
     solve_vector(&one_bad, &mut f).unwrap();
     assert_eq!(f.flags[0], flags::NO_ESTIMATE);
+}
+
+/// Weighted vector solve: equal weights reproduce `solve_vector` bit for bit; unequal weights
+/// give the weighted least-squares solution of three inconsistent maps (here, with the third map
+/// at 0° carrying a thousand times the weight, vz follows it: vz → −v_D(0°), to O(1/w));
+/// weights that are not finite and positive are a clear error.
+#[test]
+fn weighted_vector_solve() {
+    let phi = 15f64.to_radians();
+    let angles = [-phi, phi, 0.0];
+    let vd = [vec![0.05f32, -0.1], vec![-0.02f32, 0.3], vec![0.04f32, 0.2]];
+    let fl = vec![0u8; 2];
+    let inputs: Vec<VectorInput> = vd
+        .iter()
+        .zip(&angles)
+        .map(|(d, r)| VectorInput {
+            velocity: d,
+            flags: &fl,
+            projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: *r },
+        })
+        .collect();
+    let (mut a, mut b) = (VectorField::default(), VectorField::default());
+    solve_vector(&inputs, &mut a).unwrap();
+    solve_vector_weighted(&inputs, &[1.0; 3], &mut b).unwrap();
+    assert_eq!(a, b);
+    solve_vector_weighted(&inputs, &[1.0, 1.0, 1e3], &mut b).unwrap();
+    for (p, d0) in vd[2].iter().enumerate() {
+        // the 0° map's projection is (0, −1): v_D = −vz; the ±15° maps pull by ~2/1000 of
+        // their disagreement (< 0.4 m/s)
+        assert!((f64::from(b.vz[p]) + f64::from(*d0)).abs() < 1e-3, "{b:?}");
+        assert!((b.vz[p] - a.vz[p]).abs() > 1e-3, "weights change the solution: {a:?} {b:?}");
+    }
+    for w in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let e = solve_vector_weighted(&inputs, &[1.0, w, 1.0], &mut b).unwrap_err().to_string();
+        assert!(e.contains("vector weights"), "{e}");
+    }
+    let e = solve_vector_weighted(&inputs, &[1.0, 1.0], &mut b).unwrap_err().to_string();
+    assert!(e.contains("vector weights"), "{e}");
 }
 
 /// Polynomial clutter filter: polynomials up to the order vanish, a Doppler tone far from DC

@@ -3,12 +3,15 @@
 //! * `beamformer`: each RF frame → RF→I/Q (MUST `rf2iq`) → delay-and-sum onto `grid` for the
 //!   frame's plane-wave tilt, once per receive angle in `rx_angles_deg` (receive sub-apertures,
 //!   f-number `fnumber`) → one I/Q image per receive angle. DAS plans are built on the first
-//!   frame of each (tilt, RF length, fs, t0, probe) and reused.
+//!   frame of each (tilt, RF length, fs, t0, probe) and reused. `demod_fc` and `bandwidth` are
+//!   one value or one per receive angle (each look in its own band; an angle may repeat in
+//!   another band).
 //! * `doppler` (lag-L autocorrelation, eq. 19) and `doppler-loupas` (Loupas 2-D autocorrelator):
-//!   collect the I/Q images of a packet per (transmit tilt, receive angle); at the end of the
-//!   packet (a frame of the next packet, or end of stream) optionally clutter-filter them,
-//!   estimate one Doppler map per angle pair and solve the vector velocity by least squares over
-//!   all angle pairs (nominal plane-wave projections). Outputs: `vector` (vx, vz, flags, power)
+//!   collect the I/Q images of a packet per look (transmit tilt, receive angle, fc); at the end
+//!   of the packet (a frame of the next packet, or end of stream) optionally clutter-filter them,
+//!   estimate one Doppler map per look and solve the vector velocity by least squares over all
+//!   looks (nominal plane-wave or per-pixel aperture projections; looks weighted by fc², equal
+//!   weights when they share one band). Outputs: `vector` (vx, vz, flags, power)
 //!   and, if connected, `maps` (velocity, power, normalised variance, flags per angle pair).
 //!   The two kinds differ only in their default estimator, so a launch file swaps them by kind.
 
@@ -46,6 +49,45 @@ impl GridParams {
     }
 }
 
+/// A beamformer parameter given once for every receive angle or once per receive angle.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum PerAngle {
+    /// The same value for every receive angle.
+    One(f64),
+    /// One value per `rx_angles_deg` entry.
+    Each(Vec<f64>),
+}
+
+impl PerAngle {
+    /// The value for receive angle number `j`.
+    pub fn get(&self, j: usize) -> Option<f64> {
+        match self {
+            PerAngle::One(v) => Some(*v),
+            PerAngle::Each(v) => v.get(j).copied(),
+        }
+    }
+
+    fn check(&self, field: &str, n_angles: usize, ok: impl Fn(f64) -> bool, range: &str) -> Result<(), String> {
+        match self {
+            PerAngle::One(v) if !ok(*v) => Err(format!("{field} = {v} is out of range: {range}")),
+            PerAngle::One(_) => Ok(()),
+            PerAngle::Each(v) => {
+                if v.len() != n_angles {
+                    return Err(format!(
+                        "{field} has {} entries: give one value or one per rx_angles_deg entry ({n_angles})",
+                        v.len()
+                    ));
+                }
+                match v.iter().enumerate().find(|(_, x)| !ok(**x)) {
+                    Some((i, x)) => Err(format!("{field}[{i}] = {x} is out of range: {range}")),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+}
+
 /// `beamformer` parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -57,13 +99,17 @@ pub struct BeamformerParams {
     /// Receive steering angles (degrees), one I/Q image each. Paper: −15 and +15.
     pub rx_angles_deg: Vec<f64>,
     /// RF → I/Q low-pass: bandwidth in % of the demodulation frequency (absent: MUST's default
-    /// cut-off min(2 fc/fs, 0.5)).
-    pub bandwidth: Option<f64>,
+    /// cut-off min(2 fc/fs, 0.5)). One value for every receive angle, or a list with one entry
+    /// per `rx_angles_deg` entry.
+    pub bandwidth: Option<PerAngle>,
     /// Demodulation frequency (Hz) of RF → I/Q, also the I/Q images' `fc` (the Doppler nodes
     /// convert phase to velocity with it). Absent: the RF's centre frequency (MUST). A lower
     /// frequency with a narrow `bandwidth` keeps the sub-band below the grating-lobe onset
-    /// `c / (pitch (1 + sin|θ_rx|))` of steered receive sub-apertures.
-    pub demod_fc: Option<f64>,
+    /// `c / (pitch (1 + sin|θ_rx|))` of steered receive sub-apertures. One value, or a list with
+    /// one entry per `rx_angles_deg` entry: each look in its own band (an angle may then appear
+    /// twice, in two bands — e.g. the steered looks in a sub-band below their grating-lobe onset
+    /// and the near-normal ones at the probe's fc, where the echoes are strongest in phase).
+    pub demod_fc: Option<PerAngle>,
     /// Interpolation of the I/Q traces: `linear` (default) or `nearest`.
     pub interpolation: Interpolation,
 }
@@ -101,14 +147,26 @@ impl BeamformerParams {
                 return Err(format!("rx_angles_deg[{i}] = {a} needs fnumber > 0 (a steered sub-aperture)"));
             }
         }
-        if let Some(b) = self.bandwidth {
-            if !(b > 0.0 && b < 200.0) {
-                return Err(format!("bandwidth = {b} is out of range: (0, 200) % of fc"));
-            }
+        let n = self.rx_angles_deg.len();
+        if let Some(b) = &self.bandwidth {
+            b.check("bandwidth", n, |b| b > 0.0 && b < 200.0, "(0, 200) % of fc")?;
         }
-        if let Some(f) = self.demod_fc {
-            if !(f.is_finite() && f > 0.0 && f <= 1e9) {
-                return Err(format!("demod_fc = {f} is out of range: (0, 1e9] Hz (and below fs/2 of the RF)"));
+        if let Some(f) = &self.demod_fc {
+            f.check("demod_fc", n, |f| f.is_finite() && f > 0.0 && f <= 1e9, "(0, 1e9] Hz (and below fs/2 of the RF)")?;
+        }
+        // Two looks of one angle must differ in their band (the Doppler node keeps a stream per
+        // (transmit tilt, receive angle, fc)).
+        for j in 0..n {
+            for k in 0..j {
+                let same_band = |p: &Option<PerAngle>| {
+                    p.as_ref().map(|p| p.get(j).map(f64::to_bits)) == p.as_ref().map(|p| p.get(k).map(f64::to_bits))
+                };
+                if self.rx_angles_deg[j] == self.rx_angles_deg[k] && same_band(&self.demod_fc) {
+                    return Err(format!(
+                        "rx_angles_deg[{j}] = {} repeats rx_angles_deg[{k}] with the same demod_fc: a repeated angle needs its own demod_fc (a list, one per angle)",
+                        self.rx_angles_deg[j]
+                    ));
+                }
             }
         }
         Ok(())
@@ -138,20 +196,50 @@ fn plan_key(h: &sonoflow_messages::RfFrameHeaderV1) -> PlanKey {
 /// What the beamformer node does per RF frame, without IPC (used by the node and the tests).
 pub struct Beamformer {
     params: BeamformerParams,
-    rf2iq: Option<(u64, u64, u64, Rf2Iq)>,
+    /// The distinct RF → I/Q bands (demodulation frequency, bandwidth) of the receive angles.
+    bands: Vec<Band>,
+    /// Band of each receive angle.
+    band_of: Vec<usize>,
     plans: BTreeMap<PlanKey, Vec<DasPlan>>,
+}
+
+/// One RF → I/Q band and the last frame demodulated in it.
+struct Band {
+    /// `demod_fc` (None: the RF's fc).
+    demod_fc: Option<f64>,
+    bandwidth: Option<f64>,
+    /// (fd, fs, t0) bits the demodulator was built for.
+    rf2iq: Option<([u64; 3], Rf2Iq)>,
     iq: Vec<C32>,
 }
 
 impl Beamformer {
     pub fn new(params: BeamformerParams) -> Result<Self, String> {
         params.check()?;
-        Ok(Self { params, rf2iq: None, plans: BTreeMap::new(), iq: Vec::new() })
+        let mut bands: Vec<Band> = Vec::new();
+        let mut band_of = Vec::new();
+        for j in 0..params.rx_angles_deg.len() {
+            let fd = params.demod_fc.as_ref().and_then(|p| p.get(j));
+            let bw = params.bandwidth.as_ref().and_then(|p| p.get(j));
+            let same = |b: &Band| {
+                b.demod_fc.map(f64::to_bits) == fd.map(f64::to_bits)
+                    && b.bandwidth.map(f64::to_bits) == bw.map(f64::to_bits)
+            };
+            match bands.iter().position(same) {
+                Some(i) => band_of.push(i),
+                None => {
+                    band_of.push(bands.len());
+                    bands.push(Band { demod_fc: fd, bandwidth: bw, rf2iq: None, iq: Vec::new() });
+                }
+            }
+        }
+        Ok(Self { params, bands, band_of, plans: BTreeMap::new() })
     }
 
-    /// Demodulation frequency for RF frame `h`: `demod_fc` or the RF's centre frequency.
-    pub fn demod_fc(&self, h: &sonoflow_messages::RfFrameHeaderV1) -> f64 {
-        self.params.demod_fc.unwrap_or(h.fc)
+    /// Demodulation frequency of receive angle `j` for RF frame `h`: its `demod_fc` or the RF's
+    /// centre frequency.
+    pub fn demod_fc(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize) -> f64 {
+        self.band_of.get(j).and_then(|&b| self.bands[b].demod_fc).unwrap_or(h.fc)
     }
 
     /// Receive angles (rad).
@@ -166,16 +254,18 @@ impl Beamformer {
             anyhow::bail!("RF frame {}: sample_format {} is not real f32 RF", h.common.frame_id, h.sample_format);
         }
         let (ns, ne) = (h.n_samples as usize, h.n_channels as usize);
-        let fd = self.demod_fc(h);
-        let key = (fd.to_bits(), h.fs.to_bits(), h.t0.to_bits());
-        if self.rf2iq.as_ref().is_none_or(|r| (r.0, r.1, r.2) != key) {
-            let mut p = Rf2IqParams::new(fd, h.fs, self.params.bandwidth);
-            p.t0 = h.t0;
-            self.rf2iq = Some((key.0, key.1, key.2, Rf2Iq::new(p)?));
+        for band in &mut self.bands {
+            let fd = band.demod_fc.unwrap_or(h.fc);
+            let key = [fd.to_bits(), h.fs.to_bits(), h.t0.to_bits()];
+            if band.rf2iq.as_ref().is_none_or(|r| r.0 != key) {
+                let mut p = Rf2IqParams::new(fd, h.fs, band.bandwidth);
+                p.t0 = h.t0;
+                band.rf2iq = Some((key, Rf2Iq::new(p)?));
+            }
+            let Some((_, r2i)) = band.rf2iq.as_mut() else { anyhow::bail!("no demodulator") };
+            band.iq.resize(ns * ne, C32::new(0.0, 0.0));
+            r2i.process(RfView::element_major(rf, ns, ne), &mut band.iq)?;
         }
-        let Some((_, _, _, r2i)) = self.rf2iq.as_mut() else { anyhow::bail!("no demodulator") };
-        self.iq.resize(ns * ne, C32::new(0.0, 0.0));
-        r2i.process(RfView::element_major(rf, ns, ne), &mut self.iq)?;
         let pk = plan_key(h);
         if !self.plans.contains_key(&pk) {
             if self.plans.len() >= 64 {
@@ -184,9 +274,9 @@ impl Beamformer {
             let grid = self.params.grid.to_grid();
             let tx = TxWave::PlaneWave { tilt: h.tx_angle };
             let mut v = Vec::new();
-            for rx in self.rx_angles() {
+            for (j, rx) in self.rx_angles().into_iter().enumerate() {
                 let dp = DasParams {
-                    fc: fd,
+                    fc: self.demod_fc(h, j),
                     c: h.c,
                     fs: h.fs,
                     t0: h.t0,
@@ -207,7 +297,9 @@ impl Beamformer {
     pub fn image(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize, out: &mut [C32]) -> anyhow::Result<()> {
         let plans = self.plans.get(&plan_key(h)).ok_or_else(|| anyhow::anyhow!("no DAS plan for this frame"))?;
         let plan = plans.get(j).ok_or_else(|| anyhow::anyhow!("receive angle {j} out of range"))?;
-        plan.apply(&self.iq, out)?;
+        let band = self.band_of.get(j).and_then(|&b| self.bands.get(b));
+        let iq = band.ok_or_else(|| anyhow::anyhow!("receive angle {j} out of range"))?;
+        plan.apply(&iq.iq, out)?;
         Ok(())
     }
 
@@ -217,7 +309,7 @@ impl Beamformer {
         let n_rx = self.params.rx_angles_deg.len() as u64;
         let mut ih = IqFrameHeaderV1 {
             grid: GridV1 { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as u32, nz: g.nz as u32 },
-            fc: self.demod_fc(h),
+            fc: self.demod_fc(h, j),
             c: h.c,
             prf: h.prf,
             rx_angle: self.params.rx_angles_deg[j].to_radians(),
@@ -450,14 +542,15 @@ pub struct PacketResult {
 }
 
 /// (tx angle, rx angle, grid x0/z0/dx/dz, nx, nz), as bits.
-type ProjectionKey = (u64, u64, [u64; 4], u32, u32);
+type ProjectionKey = (u64, u64, u64, [u64; 4], u32, u32);
 
 /// What the Doppler node does per packet, without IPC.
 pub struct DopplerNode {
     params: DopplerNodeParams,
     default_estimator: Estimator,
     packet: Option<u32>,
-    streams: BTreeMap<(u64, u64), Stream>,
+    /// Per (transmit tilt, receive angle, fc) bits: one look each.
+    streams: BTreeMap<(u64, u64, u64), Stream>,
     map: DopplerMap,
     vec: BfVectorField,
     /// Per-pixel projections per (tx, rx, grid) when `aperture` is set.
@@ -495,7 +588,7 @@ impl DopplerNode {
             _ => None,
         };
         self.packet = Some(h.packet);
-        let key = (h.tx_angle.to_bits(), h.rx_angle.to_bits());
+        let key = (h.tx_angle.to_bits(), h.rx_angle.to_bits(), h.fc.to_bits());
         let s = self.streams.entry(key).or_insert_with(|| Stream { header: *h, frames: Vec::new() });
         if s.header.grid != h.grid {
             anyhow::bail!("I/Q frame {}: the grid changed within packet {}", h.common.frame_id, h.packet);
@@ -520,6 +613,7 @@ impl DopplerNode {
         let mut angles = Vec::new();
         let mut velocities: Vec<(Vec<f32>, Vec<u8>)> = Vec::new();
         let mut power_sum = vec![0.0f32; n];
+        let mut look_power: Vec<Vec<f32>> = Vec::new();
         let mut frame_id = 0;
         let mut t_valid = 0.0;
         for s in streams.into_values() {
@@ -589,7 +683,8 @@ impl DopplerNode {
             frame_id = frame_id.max(h.common.frame_id);
             t_valid = h.common.t_valid;
             mh.common = MsgHeaderV1 { frame_id: h.common.frame_id, t_valid: h.common.t_valid, ..Default::default() };
-            angles.push((h.tx_angle, h.rx_angle));
+            angles.push((h.tx_angle, h.rx_angle, h.fc));
+            look_power.push(self.map.power.clone());
             velocities.push((self.map.velocity.clone(), self.map.flags.clone()));
             maps.push((mh, planes));
         }
@@ -603,20 +698,22 @@ impl DopplerNode {
         if let Some(a) = &self.params.aperture {
             let g = first.grid;
             let grid = Grid { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as usize, nz: g.nz as usize };
-            for (tx, rx) in &angles {
-                let key = (tx.to_bits(), rx.to_bits(), [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits), g.nx, g.nz);
+            for (tx, rx, fc) in &angles {
+                let key =
+                    (tx.to_bits(), rx.to_bits(), fc.to_bits(), [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits), g.nx, g.nz);
                 if let std::collections::btree_map::Entry::Vacant(e) = self.projections.entry(key) {
-                    e.insert(aperture_projection(a, first.fc, first.c, *tx, *rx, &grid)?);
+                    e.insert(aperture_projection(a, *fc, first.c, *tx, *rx, &grid)?);
                 }
             }
         }
         let g = first.grid;
         let projections: Vec<Option<&Vec<[f32; 2]>>> = angles
             .iter()
-            .map(|(tx, rx)| {
+            .map(|(tx, rx, fc)| {
                 self.projections.get(&(
                     tx.to_bits(),
                     rx.to_bits(),
+                    fc.to_bits(),
                     [g.x0, g.z0, g.dx, g.dz].map(f64::to_bits),
                     g.nx,
                     g.nz,
@@ -627,7 +724,7 @@ impl DopplerNode {
             .iter()
             .zip(&angles)
             .zip(&projections)
-            .map(|(((v, f), (tx, rx)), pr)| VectorInput {
+            .map(|(((v, f), (tx, rx, _)), pr)| VectorInput {
                 velocity: v,
                 flags: f,
                 projection: match (&self.params.aperture, pr) {
@@ -636,8 +733,24 @@ impl DopplerNode {
                 },
             })
             .collect();
-        sonoflow_beamform::solve_vector(&inputs, &mut self.vec)?;
+        // Looks in different bands (the beamformer's per-angle `demod_fc`): equal phase noise
+        // means velocity noise ∝ 1/fc, so each look is weighted by (fc / highest fc)²; the power
+        // plane averages each look's power relative to its own mean (the bands' echo levels
+        // differ by orders of magnitude). One band: equal weights and the plain mean, as before.
+        let f_max = angles.iter().map(|a| a.2).fold(0.0f64, f64::max);
+        let weights: Vec<f64> = angles.iter().map(|a| (a.2 / f_max).powi(2)).collect();
+        sonoflow_beamform::solve_vector_weighted(&inputs, &weights, &mut self.vec)?;
         let k = velocities.len() as f32;
+        if angles.iter().any(|a| a.2.to_bits() != first.fc.to_bits()) {
+            let means: Vec<f64> =
+                look_power.iter().map(|p| p.iter().map(|&v| f64::from(v)).sum::<f64>() / n as f64).collect();
+            let overall = means.iter().sum::<f64>() / means.len() as f64;
+            for (i, ps) in power_sum.iter_mut().enumerate() {
+                let rel: f64 =
+                    look_power.iter().zip(&means).map(|(p, &m)| if m > 0.0 { f64::from(p[i]) / m } else { 0.0 }).sum();
+                *ps = (rel * overall) as f32;
+            }
+        }
         let mut planes = Vec::with_capacity(4 * n);
         planes.extend_from_slice(&self.vec.vx);
         planes.extend_from_slice(&self.vec.vz);
@@ -807,12 +920,17 @@ mod tests {
         let rf: Vec<f32> =
             (0..ne * ns).map(|k| (2.0 * std::f64::consts::PI * 3.6e6 * (k % ns) as f64 / fs).cos() as f32).collect();
         let phase_spread = |demod: Option<f64>| {
-            let p = BeamformerParams { demod_fc: demod, bandwidth: Some(20.0), fnumber: 1.0, ..Default::default() };
+            let p = BeamformerParams {
+                demod_fc: demod.map(PerAngle::One),
+                bandwidth: Some(PerAngle::One(20.0)),
+                fnumber: 1.0,
+                ..Default::default()
+            };
             let mut bf = Beamformer::new(p).unwrap();
             bf.demodulate(&h, &rf).unwrap();
             let fc = bf.iq_header(&h, 0).fc;
             // phase change along the middle of element 0's trace (away from the filter's edges)
-            let mid = &bf.iq[100..300];
+            let mid = &bf.bands[0].iq[100..300];
             let dphi = mid.windows(2).map(|w| (w[1] * w[0].conj()).arg().abs()).fold(0.0f32, f32::max);
             (fc, dphi, mid.iter().map(|c| c.norm()).sum::<f32>() / 200.0)
         };
@@ -822,5 +940,103 @@ mod tests {
         let (fc, _, amp) = phase_spread(None);
         assert_eq!(fc, 5e6);
         assert!(amp < 0.05, "a 20 % band around 5 MHz rejects the 3.6 MHz tone: amplitude {amp}");
+
+        // Per-angle bands: the same angle twice, at 3.6 MHz (20 %) and at 5 MHz (20 %): each look
+        // gets its own demodulation and its own `fc` in the I/Q header.
+        let p = BeamformerParams {
+            rx_angles_deg: vec![0.0, 0.0],
+            demod_fc: Some(PerAngle::Each(vec![3.6e6, 5e6])),
+            bandwidth: Some(PerAngle::One(20.0)),
+            fnumber: 1.0,
+            ..Default::default()
+        };
+        let mut bf = Beamformer::new(p).unwrap();
+        bf.demodulate(&h, &rf).unwrap();
+        assert_eq!((bf.iq_header(&h, 0).fc, bf.iq_header(&h, 1).fc), (3.6e6, 5e6));
+        assert_ne!(bf.iq_header(&h, 0).common.frame_id, bf.iq_header(&h, 1).common.frame_id);
+        let amp = |j: usize| bf.bands[bf.band_of[j]].iq[100..300].iter().map(|c| c.norm()).sum::<f32>() / 200.0;
+        assert!(amp(0) > 0.4 && amp(1) < 0.05, "3.6 MHz look {} (tone kept), 5 MHz look {} (rejected)", amp(0), amp(1));
+    }
+
+    #[test]
+    fn per_angle_band_lists_are_checked() {
+        let err = |v: serde_json::Value| validate_beamformer(&v).unwrap_err();
+        let e = err(serde_json::json!({"rx_angles_deg": [-15.0, 0.0, 15.0], "demod_fc": [3.6e6, 5e6]}));
+        assert!(e.contains("demod_fc has 2 entries") && e.contains("(3)"), "{e}");
+        let e = err(serde_json::json!({"rx_angles_deg": [-15.0, 15.0], "bandwidth": [20.0, 250.0]}));
+        assert!(e.contains("bandwidth[1] = 250") && e.contains("(0, 200)"), "{e}");
+        let e = err(serde_json::json!({"rx_angles_deg": [-15.0, 15.0], "demod_fc": [3.6e6, 0.0]}));
+        assert!(e.contains("demod_fc[1] = 0"), "{e}");
+        // A repeated angle needs its own band.
+        let e = err(serde_json::json!({"rx_angles_deg": [0.0, 15.0, 0.0]}));
+        assert!(e.contains("rx_angles_deg[2] = 0 repeats rx_angles_deg[0]"), "{e}");
+        let e = err(serde_json::json!({"rx_angles_deg": [0.0, 0.0], "demod_fc": 3.6e6}));
+        assert!(e.contains("repeats"), "{e}");
+        validate_beamformer(&serde_json::json!({"rx_angles_deg": [0.0, 0.0], "demod_fc": [3.6e6, 5e6]})).unwrap();
+        validate_beamformer(
+            &serde_json::json!({"rx_angles_deg": [-15.0, 15.0], "demod_fc": 3.6e6, "bandwidth": [20.0, 30.0]}),
+        )
+        .unwrap();
+    }
+
+    /// Looks of one angle in two bands stay two looks (streams per (tilt, angle, fc)), and the
+    /// vector solve weights each by fc²: uniform phase ramps of a known velocity (v_D = a·v,
+    /// phase step 4π fc v_D / (c PRF) per frame) give it back exactly; a look made 10 % wrong
+    /// moves the solution as the weighted normal equations, computed here independently, say.
+    #[test]
+    fn looks_in_two_bands_are_kept_apart_and_weighted_by_fc_squared() {
+        let (nx, nz, n_frames) = (3usize, 2usize, 16usize);
+        let (c, prf) = (1540.0, 1e4);
+        let v = [0.20, -0.05];
+        let looks = [(-15.0f64, 3.6e6), (15.0, 3.6e6), (0.0, 3.6e6), (0.0, 5e6)];
+        let run = |wrong: Option<usize>| {
+            let mut node = DopplerNode::new(DopplerNodeParams::default(), Estimator::Autocorrelation).unwrap();
+            for (j, &(deg, fc)) in looks.iter().enumerate() {
+                let a = sonoflow_beamform::nominal_projection(0.0, deg.to_radians());
+                let vd = (a[0] * v[0] + a[1] * v[1]) * if wrong == Some(j) { 1.1 } else { 1.0 };
+                let step = 4.0 * std::f64::consts::PI * fc * vd / (c * prf);
+                for n in 0..n_frames {
+                    let h = IqFrameHeaderV1 {
+                        grid: GridV1 { x0: 0.0, z0: 0.02, dx: 1e-4, dz: 1e-4, nx: nx as u32, nz: nz as u32 },
+                        fc,
+                        c,
+                        prf,
+                        rx_angle: deg.to_radians(),
+                        frame_in_packet: n as u32,
+                        ..Default::default()
+                    };
+                    let z = Complex32 { re: (step * n as f64).cos() as f32, im: (step * n as f64).sin() as f32 };
+                    assert!(node.push(&h, &vec![z; nx * nz]).unwrap().is_none());
+                }
+            }
+            node.finish().unwrap().unwrap()
+        };
+        let r = run(None);
+        assert_eq!(r.maps.len(), 4, "four looks, two of them at 0°");
+        let fcs: Vec<f64> = r.maps.iter().map(|m| m.0.fc).collect();
+        assert!(fcs.contains(&3.6e6) && fcs.contains(&5e6), "{fcs:?}");
+        let n = nx * nz;
+        let (vx, vz) = (&r.vector.1[..n], &r.vector.1[n..2 * n]);
+        assert!(vx.iter().all(|x| (f64::from(*x) - v[0]).abs() < 1e-5), "{vx:?}");
+        assert!(vz.iter().all(|z| (f64::from(*z) - v[1]).abs() < 1e-5), "{vz:?}");
+        // The 5 MHz look 10 % wrong: weighted least squares with w = (fc / 5 MHz)².
+        let r = run(Some(3));
+        let solve = |weighted: bool| {
+            let (mut m, mut b) = ([0.0f64; 3], [0.0f64; 2]);
+            for (j, &(deg, fc)) in looks.iter().enumerate() {
+                let a = sonoflow_beamform::nominal_projection(0.0, deg.to_radians());
+                let vd = (a[0] * v[0] + a[1] * v[1]) * if j == 3 { 1.1 } else { 1.0 };
+                let w = if weighted { (fc / 5e6).powi(2) } else { 1.0 };
+                m = [m[0] + w * a[0] * a[0], m[1] + w * a[0] * a[1], m[2] + w * a[1] * a[1]];
+                b = [b[0] + w * a[0] * vd, b[1] + w * a[1] * vd];
+            }
+            let det = m[0] * m[2] - m[1] * m[1];
+            [(m[2] * b[0] - m[1] * b[1]) / det, (m[0] * b[1] - m[1] * b[0]) / det]
+        };
+        let (want, unweighted) = (solve(true), solve(false));
+        let got = [f64::from(r.vector.1[0]), f64::from(r.vector.1[n])];
+        assert!((got[0] - want[0]).abs() < 1e-5 && (got[1] - want[1]).abs() < 1e-5, "{got:?} vs {want:?}");
+        // … not the unweighted solution: the 5 MHz look weighs (5/3.6)² = 1.93 times more.
+        assert!((unweighted[1] - want[1]).abs() > 1e-3, "weighted {want:?}, unweighted {unweighted:?}");
     }
 }

@@ -182,10 +182,23 @@ pub fn write_figures(
         keep(figures::guarded("doppler maps", || {
             let mut maps: Vec<&Map> = maps.iter().collect();
             maps.sort_by(|a, b| {
-                (a.0.tx_angle, a.0.rx_angle)
-                    .partial_cmp(&(b.0.tx_angle, b.0.rx_angle))
+                (a.0.fc, a.0.tx_angle, a.0.rx_angle)
+                    .partial_cmp(&(b.0.fc, b.0.tx_angle, b.0.rx_angle))
                     .unwrap_or(std::cmp::Ordering::Equal)
             });
+            // Looks in more than one band (the beamformer's per-angle demod_fc): name the band.
+            let bands = maps.iter().any(|m| m.0.fc.to_bits() != maps[0].0.fc.to_bits());
+            // degrees: whole ones without decimals, −7.5 as such (not rounded to −8)
+            let deg = |r: f64| {
+                let d = r.to_degrees();
+                let a = d.abs();
+                let a = if (a - a.round()).abs() < 0.05 { format!("{a:.0}") } else { format!("{a:.1}") };
+                if d < 0.0 && a != "0" {
+                    format!("-{a}")
+                } else {
+                    a
+                }
+            };
             let panels: Vec<figures::DopplerPanel> = maps
                 .iter()
                 .map(|(h, d)| {
@@ -197,8 +210,14 @@ pub fn write_figures(
                     let velocity = plane(plane::VELOCITY)
                         .ok_or_else(|| anyhow::anyhow!("map of packet {} has no `velocity` plane", h.packet))?;
                     Ok(figures::DopplerPanel {
-                        title: format!("tx {:.0}°, rx {:+.0}°", h.tx_angle.to_degrees(), h.rx_angle.to_degrees())
-                            .replace('-', "−"),
+                        title: format!(
+                            "tx {}°, rx {}{}°{}",
+                            deg(h.tx_angle),
+                            if deg(h.rx_angle).starts_with('-') { "" } else { "+" },
+                            deg(h.rx_angle),
+                            if bands { format!(", {:.1} MHz", h.fc / 1e6) } else { String::new() }
+                        )
+                        .replace('-', "−"),
                         grid: h.grid,
                         velocity,
                         power: plane(plane::POWER),
