@@ -86,6 +86,18 @@ fn doppler_sign_toward_probe_from_delays() {
     assert!((f64::from(m.velocity[0]) - v_true).abs() < 1e-4, "{}", m.velocity[0]);
 }
 
+/// Vector-solve inputs of Doppler maps `vd` (one per receive angle) with nominal projections.
+fn nominal_inputs<'a>(vd: &'a [Vec<f32>], flags: &'a [u8], tilt: f64, angles: &[f64]) -> Vec<VectorInput<'a>> {
+    vd.iter()
+        .zip(angles)
+        .map(|(d, r)| VectorInput {
+            velocity: d,
+            flags,
+            projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *r },
+        })
+        .collect()
+}
+
 /// Paper eq. 20 (θt = 0, θr = ∓15°) equals our least squares with the paper's Doppler values
 /// being the negatives of ours; the LS also recovers v for a steered transmit and 3 angles.
 #[test]
@@ -102,15 +114,7 @@ fn vector_solve_matches_eq20_and_steered_geometry() {
             })
             .collect();
         let fl = vec![0u8];
-        let inputs: Vec<VectorInput> = vd
-            .iter()
-            .zip(&angles)
-            .map(|(d, r)| VectorInput {
-                velocity: d,
-                flags: &fl,
-                projection: Projection::Nominal { tx_tilt: tilt, rx_angle: *r },
-            })
-            .collect();
+        let inputs = nominal_inputs(&vd, &fl, tilt, &angles);
         let mut f = VectorField::default();
         solve_vector(&inputs, &mut f).unwrap();
         assert!((f64::from(f.vx[0]) - v[0]).abs() < 1e-6 && (f64::from(f.vz[0]) - v[1]).abs() < 1e-6, "{f:?}");
@@ -151,15 +155,7 @@ fn weighted_vector_solve() {
     let angles = [-phi, phi, 0.0];
     let vd = [vec![0.05f32, -0.1], vec![-0.02f32, 0.3], vec![0.04f32, 0.2]];
     let fl = vec![0u8; 2];
-    let inputs: Vec<VectorInput> = vd
-        .iter()
-        .zip(&angles)
-        .map(|(d, r)| VectorInput {
-            velocity: d,
-            flags: &fl,
-            projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: *r },
-        })
-        .collect();
+    let inputs = nominal_inputs(&vd, &fl, 0.0, &angles);
     let (mut a, mut b) = (VectorField::default(), VectorField::default());
     solve_vector(&inputs, &mut a).unwrap();
     solve_vector_weighted(&inputs, &[1.0; 3], &mut b).unwrap();

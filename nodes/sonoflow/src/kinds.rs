@@ -122,8 +122,8 @@ static KINDS: &[KindSpec] = &[
         ],
         dynamic_inputs: false,
         dynamic_outputs: false,
-        validate: crate::node_beamform::validate_doppler,
-        run: crate::node_beamform::run_doppler,
+        validate: crate::node_doppler::validate_doppler,
+        run: crate::node_doppler::run_doppler,
     },
     KindSpec {
         name: "doppler-loupas",
@@ -135,8 +135,8 @@ static KINDS: &[KindSpec] = &[
         ],
         dynamic_inputs: false,
         dynamic_outputs: false,
-        validate: crate::node_beamform::validate_doppler,
-        run: crate::node_beamform::run_doppler_loupas,
+        validate: crate::node_doppler::validate_doppler,
+        run: crate::node_doppler::run_doppler_loupas,
     },
     KindSpec {
         name: "regulariser",

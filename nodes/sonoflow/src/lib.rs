@@ -9,6 +9,7 @@ pub mod figures;
 pub mod kinds;
 pub mod launch;
 pub mod node_beamform;
+pub mod node_doppler;
 pub mod node_evaluate;
 pub mod node_flow;
 pub mod node_platelet;
