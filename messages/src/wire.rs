@@ -188,6 +188,11 @@ pub mod plane {
     pub const MASK: u32 = 7;
     /// Weight / quality in [0, 1].
     pub const WEIGHT: u32 = 8;
+    /// Doppler projection vector of a colour-Doppler map, lateral component: the map's
+    /// `velocity` measures `projection_x·vx + projection_z·vz` (dimensionless, per pixel).
+    pub const PROJECTION_X: u32 = 9;
+    /// Doppler projection vector, axial component (see [`PROJECTION_X`]).
+    pub const PROJECTION_Z: u32 = 10;
 
     /// Human-readable plane name.
     pub fn name(id: u32) -> &'static str {
@@ -200,6 +205,8 @@ pub mod plane {
             VZ => "vz",
             MASK => "mask",
             WEIGHT => "weight",
+            PROJECTION_X => "projection_x",
+            PROJECTION_Z => "projection_z",
             _ => "unused",
         }
     }

@@ -250,39 +250,119 @@ pub fn field_error_samples(
     let PixelGrid { nx, nz, .. } = grid;
     let (tvx, tvz, mask) = truth;
     let (vx, vz, flags) = est;
-    let inside = |ix: usize, iz: usize| mask[iz * nx + ix] > 0.5;
-    let v_max = tvx
-        .iter()
-        .zip(tvz)
-        .zip(mask)
-        .filter(|(_, m)| **m > 0.5)
-        .map(|((a, b), _)| (*a as f64).hypot(*b as f64))
-        .fold(0.0, f64::max);
+    let v_max = max_speed(tvx, tvz, mask);
     if v_max <= 0.0 || nx <= 2 * margin || nz <= 2 * margin {
         return (FieldError { v_max, ..Default::default() }, Samples::default());
     }
     let wall = wall_distance(mask, grid);
     let mut smp = Samples::default();
-    let (mut pixels, mut no_estimate) = (0, 0);
+    let counted = counted_pixels(mask, grid, margin);
+    let mut no_estimate = 0;
+    for &i in &counted {
+        if flags.is_some_and(|f| (f[i] as u32) & 1 != 0) || !(vx[i].is_finite() && vz[i].is_finite()) {
+            no_estimate += 1;
+            continue;
+        }
+        smp.ex.push((vx[i] as f64 - tvx[i] as f64) / v_max);
+        smp.ez.push((vz[i] as f64 - tvz[i] as f64) / v_max);
+        smp.tx.push(tvx[i] as f64 / v_max);
+        smp.tz.push(tvz[i] as f64 / v_max);
+        smp.wall_m.push(wall[i]);
+    }
+    (smp.field_error(counted.len(), no_estimate, v_max), smp)
+}
+
+/// Error of one look's colour-Doppler map against the truth projected on the look's direction:
+/// per counted pixel `e = (v − a·v_true)/v_max`, `a` the map's projection vector (planes
+/// `projection_x`, `projection_z`), `v_max` the largest true speed — where a look reads a scale
+/// error (e.g. its band's mean frequency differs from the demodulation frequency) or a bias of
+/// its own before the vector solve mixes the looks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LookError {
+    /// Transmit tilt and receive angle (degrees), demodulation frequency (Hz).
+    pub tx_angle_deg: f64,
+    pub rx_angle_deg: f64,
+    pub fc: f64,
+    /// Pixels inside the vessel (as for the fields) and, of those, without an estimate.
+    pub pixels: usize,
+    pub no_estimate: usize,
+    /// Distribution of e (fractions of v_max).
+    pub error: ErrorStats,
+    /// Σ v·(a·v_true) / Σ (a·v_true)²: 1 without scale error. `None` where a·v_true is zero.
+    pub gain: Option<f64>,
+}
+
+/// One look's map planes: velocity, optional flags, projection_x, projection_z.
+pub type LookPlanes<'a> = (&'a [f32], Option<&'a [f32]>, &'a [f32], &'a [f32]);
+
+/// One look's samples (see [`LookError`]): errors e, projected truths t (both fractions of the
+/// packet's v_max), pixels counted and pixels without estimate. The truth is (`vx`, `vz`,
+/// `mask`); the map (`velocity`, optional `flags`, `projection_x`, `projection_z`), all on `grid`.
+pub fn look_error_samples(
+    truth: (&[f32], &[f32], &[f32]),
+    map: LookPlanes<'_>,
+    grid: PixelGrid,
+    margin: usize,
+) -> (Vec<f64>, Vec<f64>, usize, usize) {
+    let (tvx, tvz, mask) = truth;
+    let (vel, flags, px, pz) = map;
+    let v_max = max_speed(tvx, tvz, mask);
+    let (mut e, mut t, mut no_estimate) = (Vec::new(), Vec::new(), 0);
+    let counted = counted_pixels(mask, grid, margin);
+    if v_max <= 0.0 {
+        return (e, t, counted.len(), 0);
+    }
+    for &i in &counted {
+        if flags.is_some_and(|f| (f[i] as u32) & 1 != 0) || !vel[i].is_finite() {
+            no_estimate += 1;
+            continue;
+        }
+        let truth = f64::from(px[i]) * f64::from(tvx[i]) + f64::from(pz[i]) * f64::from(tvz[i]);
+        e.push((f64::from(vel[i]) - truth) / v_max);
+        t.push(truth / v_max);
+    }
+    (e, t, counted.len(), no_estimate)
+}
+
+/// [`LookError`] from pooled samples.
+pub fn look_error(look: (f64, f64, f64), e: &[f64], t: &[f64], pixels: usize, no_estimate: usize) -> LookError {
+    LookError {
+        tx_angle_deg: look.0.to_degrees(),
+        rx_angle_deg: look.1.to_degrees(),
+        fc: look.2,
+        pixels,
+        no_estimate,
+        error: error_stats(e),
+        gain: gain(e, t),
+    }
+}
+
+/// Largest true speed inside the mask.
+fn max_speed(tvx: &[f32], tvz: &[f32], mask: &[f32]) -> f64 {
+    tvx.iter()
+        .zip(tvz)
+        .zip(mask)
+        .filter(|(_, m)| **m > 0.5)
+        .map(|((a, b), _)| (*a as f64).hypot(*b as f64))
+        .fold(0.0, f64::max)
+}
+
+/// Row-major indices of the pixels whose whole `(2·margin+1)²` neighbourhood is inside the mask.
+fn counted_pixels(mask: &[f32], grid: PixelGrid, margin: usize) -> Vec<usize> {
+    let PixelGrid { nx, nz, .. } = grid;
+    if nx <= 2 * margin || nz <= 2 * margin {
+        return Vec::new();
+    }
+    let inside = |ix: usize, iz: usize| mask[iz * nx + ix] > 0.5;
+    let mut out = Vec::new();
     for iz in margin..nz - margin {
         for ix in margin..nx - margin {
-            if !(iz - margin..=iz + margin).all(|z| (ix - margin..=ix + margin).all(|x| inside(x, z))) {
-                continue;
+            if (iz - margin..=iz + margin).all(|z| (ix - margin..=ix + margin).all(|x| inside(x, z))) {
+                out.push(iz * nx + ix);
             }
-            pixels += 1;
-            let i = iz * nx + ix;
-            if flags.is_some_and(|f| (f[i] as u32) & 1 != 0) || !(vx[i].is_finite() && vz[i].is_finite()) {
-                no_estimate += 1;
-                continue;
-            }
-            smp.ex.push((vx[i] as f64 - tvx[i] as f64) / v_max);
-            smp.ez.push((vz[i] as f64 - tvz[i] as f64) / v_max);
-            smp.tx.push(tvx[i] as f64 / v_max);
-            smp.tz.push(tvz[i] as f64 / v_max);
-            smp.wall_m.push(wall[i]);
         }
     }
-    (smp.field_error(pixels, no_estimate, v_max), smp)
+    out
 }
 
 #[cfg(test)]

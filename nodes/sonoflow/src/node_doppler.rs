@@ -6,7 +6,8 @@
 //! estimate one Doppler map per look and solve the vector velocity by least squares over all looks
 //! (nominal plane-wave or per-pixel aperture projections; looks weighted by fc², equal weights
 //! when they share one band). Outputs: `vector` (vx, vz, flags, power) and, if connected, `maps`
-//! (velocity, power, normalised variance, flags per look). The two kinds differ only in their
+//! (velocity, power, normalised variance, flags and the projection vector `projection_x`,
+//! `projection_z` per look: the map's velocity measures projection · (vx, vz)). The two kinds differ only in their
 //! default estimator, so a launch file swaps them by kind.
 
 use crate::kinds::parse;
@@ -191,7 +192,8 @@ struct Stream {
 
 /// Products of one packet.
 pub struct PacketResult {
-    /// One Doppler map header + planes (velocity, power, variance, flags) per look.
+    /// One Doppler map header + planes (velocity, power, variance, flags, projection_x,
+    /// projection_z) per look.
     pub maps: Vec<(DopplerMapHeaderV1, Vec<f32>)>,
     /// The vector field header + planes (vx, vz, flags, power).
     pub vector: (VectorFieldHeaderV1, Vec<f32>),
@@ -359,6 +361,23 @@ impl DopplerNode {
             }
         }
         let projections: Vec<Option<&Vec<[f32; 2]>>> = angles.iter().map(|l| self.projections.get(&key(l))).collect();
+        // Each map carries the projection its velocity was solved with (planes `projection_x`,
+        // `projection_z`): the evaluator compares every look with the truth projected the same way.
+        for (((mh, planes), &(tx, rx, _)), pr) in maps.iter_mut().zip(&angles).zip(&projections) {
+            match (&self.params.aperture, pr) {
+                (Some(_), Some(p)) => {
+                    planes.extend(p.iter().map(|a| a[0]));
+                    planes.extend(p.iter().map(|a| a[1]));
+                }
+                _ => {
+                    let a = sonoflow_beamform::nominal_projection(tx, rx);
+                    planes.extend(std::iter::repeat_n(a[0] as f32, n));
+                    planes.extend(std::iter::repeat_n(a[1] as f32, n));
+                }
+            }
+            mh.n_planes = 6;
+            mh.plane_ids[4..6].copy_from_slice(&[plane::PROJECTION_X, plane::PROJECTION_Z]);
+        }
         let inputs: Vec<VectorInput> = velocities
             .iter()
             .zip(&angles)
@@ -597,6 +616,19 @@ mod tests {
         let fcs: Vec<f64> = r.maps.iter().map(|m| m.0.fc).collect();
         assert!(fcs.contains(&3.6e6) && fcs.contains(&5e6), "{fcs:?}");
         let n = nx * nz;
+        // Each map carries the projection it was solved with, and its velocity is that
+        // projection of the true velocity (what the evaluator's per-look errors rely on).
+        for (mh, planes) in &r.maps {
+            assert_eq!(mh.n_planes, 6);
+            assert_eq!(&mh.plane_ids[4..6], &[plane::PROJECTION_X, plane::PROJECTION_Z]);
+            let a = sonoflow_beamform::nominal_projection(mh.tx_angle, mh.rx_angle);
+            for i in 0..n {
+                let (vel, px, pz) = (planes[i], planes[4 * n + i], planes[5 * n + i]);
+                assert_eq!((px, pz), (a[0] as f32, a[1] as f32));
+                let want = f64::from(px) * v[0] + f64::from(pz) * v[1];
+                assert!((f64::from(vel) - want).abs() < 1e-5, "{vel} vs {want}");
+            }
+        }
         let (vx, vz) = (&r.vector.1[..n], &r.vector.1[n..2 * n]);
         assert!(vx.iter().all(|x| (f64::from(*x) - v[0]).abs() < 1e-5), "{vx:?}");
         assert!(vz.iter().all(|z| (f64::from(*z) - v[1]).abs() < 1e-5), "{vz:?}");

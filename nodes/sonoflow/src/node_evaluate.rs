@@ -11,7 +11,7 @@
 //! estimators side by side) each get a `label`: their files are then `evaluation-<label>.json` /
 //! `.md` and `figures/<name>-<label>.png`.
 
-use crate::evaluate::{field_error_samples, FieldError, PixelGrid, Samples};
+use crate::evaluate::{field_error_samples, look_error, look_error_samples, FieldError, LookError, PixelGrid, Samples};
 use crate::figures::{self, Figure};
 use crate::kinds::parse;
 use iceoryx2::prelude::*;
@@ -88,6 +88,11 @@ pub struct Evaluation {
     /// relative to its packet's v_max); `pixels`/`no_estimate` summed, `v_max` the largest.
     #[serde(default)]
     pub overall: BTreeMap<String, FieldError>,
+    /// Per look (transmit tilt, receive angle, band) of the `maps` input, all packets pooled: the
+    /// error of its Doppler velocity against the truth projected on its direction (maps that
+    /// carry `projection_x`/`projection_z` planes; empty without `maps`).
+    #[serde(default)]
+    pub looks: Vec<LookError>,
     /// Figures written into `<run>/figures/` (paths relative to the run folder).
     #[serde(default)]
     pub figures: Vec<Figure>,
@@ -104,6 +109,74 @@ fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a
     let np = (h.n_planes as usize).min(h.plane_ids.len());
     let k = h.plane_ids[..np].iter().position(|&p| p == id)?;
     data.get(k * n..(k + 1) * n)
+}
+
+fn map_plane<'a>(h: &DopplerMapHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
+    let n = h.grid.nx as usize * h.grid.nz as usize;
+    let np = (h.n_planes as usize).min(h.plane_ids.len());
+    let k = h.plane_ids[..np].iter().position(|&p| p == id)?;
+    data.get(k * n..(k + 1) * n)
+}
+
+/// One look's errors pooled over packets: (tx, rx, fc), errors, projected truths, pixels, pixels
+/// without estimate.
+pub type LookPool = ((f64, f64, f64), Vec<f64>, Vec<f64>, usize, usize);
+
+/// Adds the per-look errors of `map` against `truth` to `pools` (keyed by the look). `Ok(false)`
+/// when the map carries no projection planes (nothing to compare); an error when its grid is not
+/// the truth's.
+pub fn pool_look(
+    pools: &mut BTreeMap<(u64, u64, u64), LookPool>,
+    truth: &Field,
+    map: &Map,
+    margin: usize,
+) -> anyhow::Result<bool> {
+    let (th, tv) = truth;
+    let (mh, md) = map;
+    let (Some(vel), Some(px), Some(pz)) = (
+        map_plane(mh, md, plane::VELOCITY),
+        map_plane(mh, md, plane::PROJECTION_X),
+        map_plane(mh, md, plane::PROJECTION_Z),
+    ) else {
+        return Ok(false);
+    };
+    if th.grid != mh.grid {
+        anyhow::bail!(
+            "packet {}: the Doppler map (rx {:.1}°) is not on the truth's grid: per-look errors need the same grid",
+            mh.packet,
+            mh.rx_angle.to_degrees()
+        );
+    }
+    let need = |id: u32| {
+        plane_of(th, tv, id)
+            .ok_or_else(|| anyhow::anyhow!("truth of packet {} has no `{}` plane", th.packet, plane::name(id)))
+    };
+    let grid = PixelGrid { nx: th.grid.nx as usize, nz: th.grid.nz as usize, dx: th.grid.dx, dz: th.grid.dz };
+    let (e, t, pixels, no_estimate) = look_error_samples(
+        (need(plane::VX)?, need(plane::VZ)?, need(plane::MASK)?),
+        (vel, map_plane(mh, md, plane::FLAGS), px, pz),
+        grid,
+        margin,
+    );
+    let key = (mh.tx_angle.to_bits(), mh.rx_angle.to_bits(), mh.fc.to_bits());
+    let pool = pools.entry(key).or_insert_with(|| ((mh.tx_angle, mh.rx_angle, mh.fc), Vec::new(), Vec::new(), 0, 0));
+    pool.1.extend(e);
+    pool.2.extend(t);
+    pool.3 += pixels;
+    pool.4 += no_estimate;
+    Ok(true)
+}
+
+/// The pooled per-look errors, by band then receive angle.
+pub fn looks(pools: BTreeMap<(u64, u64, u64), LookPool>) -> Vec<LookError> {
+    let mut out: Vec<LookError> =
+        pools.into_values().map(|(look, e, t, pixels, no_est)| look_error(look, &e, &t, pixels, no_est)).collect();
+    out.sort_by(|a, b| {
+        a.fc.total_cmp(&b.fc)
+            .then(a.rx_angle_deg.total_cmp(&b.rx_angle_deg))
+            .then(a.tx_angle_deg.total_cmp(&b.tx_angle_deg))
+    });
+    out
 }
 
 /// Errors of `est` against `truth` (same grid required).
@@ -365,6 +438,29 @@ pub fn markdown(e: &Evaluation) -> String {
             );
         }
     }
+    if !e.looks.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nPer look ({}): each look's Doppler velocity against the true velocity projected on its direction (the map's projection vector), in % of v_max, before the vector solve mixes the looks. Gain below 1: the look under-reads (e.g. blur, or the echoes' mean frequency below the demodulation frequency); above 1: over-reads.\n",
+            if e.packets.len() > 1 { "all packets pooled" } else { "the packet" }
+        );
+        let _ = writeln!(s, "| tx | rx | fc (MHz) | pixels | bias | RMS | \\|e\\|₇₅ | gain |");
+        let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for l in &e.looks {
+            let _ = writeln!(
+                s,
+                "| {:.1}° | {:.1}° | {:.2} | {} | {:+.2} % | {:.2} % | {:.2} % | {} |",
+                l.tx_angle_deg,
+                l.rx_angle_deg,
+                l.fc / 1e6,
+                l.pixels - l.no_estimate,
+                100.0 * l.error.bias,
+                100.0 * l.error.rms,
+                100.0 * l.error.abs_p75,
+                l.gain.map_or("—".to_string(), |g| format!("{g:.3}"))
+            );
+        }
+    }
     s
 }
 
@@ -433,6 +529,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let mut truth_eos = false;
     let mut est_eos = vec![false; est_in.len()];
     let mut maps_eos = maps_in.is_none();
+    // maps waiting for their packet's truth, and the per-look pools
+    let mut look_pending: BTreeMap<u32, Vec<Map>> = BTreeMap::new();
+    let mut look_pools: BTreeMap<(u64, u64, u64), LookPool> = BTreeMap::new();
     loop {
         if let Some(m) = maps_in.as_mut() {
             while let Some(s) = m.try_receive()? {
@@ -442,8 +541,12 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                     break;
                 }
                 kit.stats.messages_in += 1;
+                let m = (h, s.payload().to_vec());
+                if map_plane(&m.0, &m.1, plane::PROJECTION_X).is_some() {
+                    look_pending.entry(h.packet).or_default().push(m.clone());
+                }
                 if p.figures {
-                    fig.keep_map((h, s.payload().to_vec()));
+                    fig.keep_map(m);
                 }
             }
         }
@@ -500,6 +603,13 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
             kit.record(truth.0.common.frame_id, truth.0.common.t_valid, thread_cpu_ns() - t0)?;
         }
+        let ready: Vec<u32> = look_pending.keys().filter(|pk| truths.contains_key(pk)).copied().collect();
+        for pk in ready {
+            let (Some(maps), Some(truth)) = (look_pending.remove(&pk), truths.get(&pk)) else { continue };
+            for m in &maps {
+                pool_look(&mut look_pools, truth, m, p.margin)?;
+            }
+        }
         if truth_eos && est_eos.iter().all(|e| *e) && maps_eos {
             break;
         }
@@ -520,8 +630,12 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     for (pk, name) in estimates.keys() {
         eprintln!("evaluator: no ground truth for packet {pk} ({name}): not evaluated");
     }
+    for pk in look_pending.keys() {
+        eprintln!("evaluator: no ground truth for packet {pk} (Doppler maps): per-look errors left out");
+    }
     eval.packets = done.into_values().collect();
     eval.overall = overall(pooled_all);
+    eval.looks = looks(look_pools);
     if let Some(dir) = &kit.cfg.out_dir {
         let dir = std::path::Path::new(dir);
         if p.figures {
@@ -645,5 +759,73 @@ mod tests {
         assert!((o.x.abs_p75 - 0.03).abs() < 1e-6, "{}", o.x.abs_p75);
         let md = markdown(&Evaluation { packets: vec![], overall: all, ..Default::default() });
         assert!(!md.contains("| all |"), "a single or no packet has no overall row");
+    }
+
+    /// Per-look errors: a look reading 5 % high has gain 1.05 and its bias is 5 % of the mean
+    /// projected truth; the two looks (steered ±15°, per-pixel projections that vary over the
+    /// grid) are kept apart and pooled over packets; a map without projection planes is skipped,
+    /// one on another grid is an error.
+    #[test]
+    fn per_look_errors_against_the_projected_truth() {
+        let grid = GridV1 { x0: -0.004, z0: 0.01, dx: 0.25e-3, dz: 0.25e-3, nx: 33, nz: 25 };
+        let (nx, n) = (33usize, 33 * 25);
+        let mask: Vec<f32> = (0..n).map(|i: usize| if (i / nx).abs_diff(12) < 8 { 1.0 } else { 0.0 }).collect();
+        // a sheared flow: vx varies with depth, vz with x
+        let tvx: Vec<f32> = (0..n).map(|i| mask[i] * (0.1 + 0.02 * (i / nx) as f32)).collect();
+        let tvz: Vec<f32> = (0..n).map(|i| mask[i] * 0.002 * (i % nx) as f32).collect();
+        let truth = |packet| {
+            field(grid, packet, &[(plane::VX, tvx.clone()), (plane::VZ, tvz.clone()), (plane::MASK, mask.clone())])
+        };
+        let map = |packet: u32, rx_deg: f64, scale: f32, with_projection: bool| -> Map {
+            let a = sonoflow_beamform::nominal_projection(0.0, rx_deg.to_radians());
+            // a projection that varies over the grid, as the per-pixel aperture's does
+            let px: Vec<f32> = (0..n).map(|i| a[0] as f32 * (1.0 + 0.001 * (i % nx) as f32)).collect();
+            let pz: Vec<f32> = (0..n).map(|i| a[1] as f32 * (1.0 - 0.001 * (i / nx) as f32)).collect();
+            let vel: Vec<f32> = (0..n).map(|i| scale * (px[i] * tvx[i] + pz[i] * tvz[i])).collect();
+            let mut h =
+                DopplerMapHeaderV1 { grid, packet, rx_angle: rx_deg.to_radians(), fc: 5e6, ..Default::default() };
+            let mut planes: Vec<(u32, Vec<f32>)> = vec![(plane::VELOCITY, vel), (plane::POWER, vec![1.0; n])];
+            if with_projection {
+                planes.extend([(plane::PROJECTION_X, px), (plane::PROJECTION_Z, pz)]);
+            }
+            h.n_planes = planes.len() as u32;
+            for (k, (id, _)) in planes.iter().enumerate() {
+                h.plane_ids[k] = *id;
+            }
+            (h, planes.into_iter().flat_map(|(_, d)| d).collect())
+        };
+        let mut pools = BTreeMap::new();
+        for packet in [0u32, 1] {
+            assert!(pool_look(&mut pools, &truth(packet), &map(packet, -15.0, 1.05, true), 2).unwrap());
+            assert!(pool_look(&mut pools, &truth(packet), &map(packet, 15.0, 1.0, true), 2).unwrap());
+            assert!(!pool_look(&mut pools, &truth(packet), &map(packet, 0.0, 1.0, false), 2).unwrap());
+        }
+        let out = looks(pools);
+        assert_eq!(out.len(), 2);
+        let (minus, plus) = (&out[0], &out[1]);
+        assert_eq!((minus.rx_angle_deg.round(), plus.rx_angle_deg.round()), (-15.0, 15.0));
+        // counted pixels: rows 5..=19 inside, eroded by 2 → rows 7..=17 (11), columns 2..=30 (29), two packets
+        assert_eq!(minus.pixels, 2 * 11 * 29);
+        assert_eq!(minus.no_estimate, 0);
+        assert!((minus.gain.unwrap() - 1.05).abs() < 1e-5, "{:?}", minus.gain);
+        assert!((plus.gain.unwrap() - 1.0).abs() < 1e-6, "{:?}", plus.gain);
+        assert!(plus.error.abs_p75 < 1e-6 && plus.error.bias.abs() < 1e-6, "{:?}", plus.error);
+        // bias of the 5 % look = 0.05 × mean projected truth / v_max, computed independently
+        let v_max =
+            (0..n).filter(|&i| mask[i] > 0.5).map(|i| f64::from(tvx[i]).hypot(f64::from(tvz[i]))).fold(0.0, f64::max);
+        let (h, d) = map(0, -15.0, 1.0, true);
+        let proj = |i: usize| f64::from(d[2 * n + i]) * f64::from(tvx[i]) + f64::from(d[3 * n + i]) * f64::from(tvz[i]);
+        let counted: Vec<usize> = (7..=17).flat_map(|iz| (2..=30).map(move |ix| iz * nx + ix)).collect();
+        let want = 0.05 * counted.iter().map(|&i| proj(i)).sum::<f64>() / counted.len() as f64 / v_max;
+        assert!((minus.error.bias - want).abs() < 1e-6, "{} vs {want}", minus.error.bias);
+        assert!(want.abs() > 1e-3);
+        // the report's table
+        let md = markdown(&Evaluation { looks: out.clone(), ..Default::default() });
+        assert!(md.contains("Per look") && md.contains("| 0.0° | -15.0° | 5.00 |") && md.contains("1.050"), "{md}");
+        // a map on another grid
+        let mut other = (h, d);
+        other.0.grid.nx = 11;
+        let e = pool_look(&mut BTreeMap::new(), &truth(0), &other, 2).unwrap_err().to_string();
+        assert!(e.contains("not on the truth's grid"), "{e}");
     }
 }
