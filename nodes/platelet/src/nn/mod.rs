@@ -4,7 +4,7 @@
 //! - [`mlp`]: the network [`Mlp`] (any layer sizes, ReLU on hidden layers, linear output, input
 //!   standardisation and output scaling stored with the weights), a batched f32 forward pass for
 //!   inference and an f64 path for training.
-//! - [`train`]: backpropagation of the mean squared error, Adam with a cosine learning-rate
+//! - [`mod@train`]: backpropagation of the mean squared error, Adam with a cosine learning-rate
 //!   schedule, seeded mini-batches, He initialisation, best weights on a validation split (by
 //!   shape), optional per-output loss weights, mirror augmentation or mirror-averaged networks
 //!   ([`mlp::Mirror`]: the platelet mirrored about its x axis), full-batch L-BFGS refinement.

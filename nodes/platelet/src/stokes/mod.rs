@@ -13,7 +13,7 @@
 //!
 //! **Discretisation.** Each surface is parametrised by (β, θ): R = sin β over the disc, the top
 //! sheet β < π/2 and the bottom one β > π/2 at the heights of [`crate::shape::Shape::half_thickness`]
-//! (module [`mesh`]); uniform panels in β cluster toward the rim (1 − R ≈ (π/2 − β)²/2), where the
+//! (module `mesh`); uniform panels in β cluster toward the rim (1 − R ≈ (π/2 − β)²/2), where the
 //! surface is vertical, and an edge lies on the rim. `n_theta = 2 n_beta` panels in θ start at
 //! θ = 0, so the mesh is mirror symmetric in x → −x and z → −z to round-off: the lift of a
 //! symmetric shape at ψ = 0, π/2 and the pitching torque of α_top = α_bot then vanish to
@@ -25,7 +25,7 @@
 //! the sphere the weight is constant. The integral equation is collocated at the panels' parameter
 //! centres.
 //!
-//! **Quadrature** (module [`quadrature`]): Gauss rules of 2, 3 or 6 points per direction by the
+//! **Quadrature** (module `quadrature`): Gauss rules of 2, 3 or 6 points per direction by the
 //! ratio of distance to panel diameter (≥ 4, 2, 1), recursive bisection of the physically
 //! longer side below that. That resolves the near-singular integrals between the top and bottom
 //! faces of thin platelets (0.07 µm apart against 0.2 µm panels at Ly = 0.15 µm, α = 0.2) and the

@@ -69,7 +69,7 @@ pub struct BuildOptions {
     /// Sample the grids on rayon threads (feature `parallel`; the same result either way). Default true.
     pub parallel: bool,
     /// Iterations of the geometric relaxation of the fluid particles against the walls and the
-    /// reservoirs ([`super::relax`]): evens out the kernel sums next to curved walls, where the cut
+    /// reservoirs (`super::relax`): evens out the kernel sums next to curved walls, where the cut
     /// lattice leaves its first row 0.5–1.5 dx from the wall. Default 0 (the paper's lattice as is);
     /// the `sph-flow` node uses 200.
     #[serde(default)]

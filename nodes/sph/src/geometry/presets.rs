@@ -138,7 +138,7 @@ pub const CAROTID_FILLET: Real = 1.0e-3;
 /// [`super::VesselGeometry::build`]). The carina is the sharp corner where the internal branch's
 /// lower wall meets the external branch's upper wall, past the CCA's cap; the wall between the
 /// daughters is 1 mm thick 1 mm past the apex, 2 mm at 2 mm, 7 mm at x = 10. The union is blended
-/// with [`CAROTID_FILLET`], which rounds that corner into an apex of ≈ 0.5 mm radius (a sharp wedge
+/// with `CAROTID_FILLET`, which rounds that corner into an apex of ≈ 0.5 mm radius (a sharp wedge
 /// has too few wall particles at its tip to hold the fluid off it: particles pile up at the
 /// stagnation point).
 pub fn carotid_bifurcation() -> VesselGeometry {
