@@ -74,6 +74,7 @@ fn main() {
         fnumber: 3.0,
         rx_angle: 0.0,
         interpolation: Interpolation::Linear,
+        apodization: Default::default(),
     };
     let grid = Grid::spanning(-19e-3, 19e-3, 200, 5e-3, 45e-3, 200).unwrap();
     let tx = TxWave::PlaneWave { tilt: 0.0 };

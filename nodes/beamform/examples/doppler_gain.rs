@@ -93,6 +93,7 @@ fn main() {
             fnumber: fnum,
             rx_angle: rx,
             interpolation: Interpolation::Linear,
+            apodization: Default::default(),
         };
         let dplan = DasPlan::new(&p, &wave, &grid, plan.n_samples).unwrap();
         let imgs: Vec<Vec<C32>> = frames.iter().map(|f| dplan.apply_to_vec(f).unwrap()).collect();

@@ -28,7 +28,7 @@ pub mod rf2iq;
 pub mod vector;
 
 pub use clutter::ClutterFilter;
-pub use das::{CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
+pub use das::{Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
 pub use doppler::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
 pub use error::{BeamformError, Result};
 pub use grid::Grid;

@@ -72,6 +72,7 @@ fn lateral_gain(pitch: f64, fd: f64, bandwidth: Option<f64>) -> f64 {
             fnumber: 3.0,
             rx_angle: rx_deg.to_radians(),
             interpolation: Interpolation::Linear,
+            apodization: Default::default(),
         };
         let dplan = DasPlan::new(&p, &TxWave::PlaneWave { tilt: 0.0 }, &grid, plan.n_samples).unwrap();
         let imgs: Vec<Vec<C32>> = frames.iter().map(|f| dplan.apply_to_vec(f).unwrap()).collect();

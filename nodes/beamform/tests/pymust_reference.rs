@@ -90,6 +90,7 @@ fn das_params(fnumber: f64, rx_angle: f64) -> DasParams {
         fnumber,
         rx_angle,
         interpolation: Interpolation::Linear,
+        apodization: Default::default(),
     }
 }
 

@@ -530,6 +530,41 @@ pub fn resolve(mut file: LaunchFile, base_dir: &Path, ov: &Overrides) -> Result<
         }
     }
 
+    // A Doppler node's `aperture` describes the receive aperture of the beamformer feeding it:
+    // its per-pixel projections are wrong if f-number or apodisation differ.
+    for (name, (_, spec)) in &programs {
+        if !spec.is_some_and(|s| s.name == "doppler" || s.name == "doppler-loupas") {
+            continue;
+        }
+        let Some(topic) = wiring.get(name).and_then(|w| w.inputs.get("iq")) else { continue };
+        let Some(&[src]) = producers.get(topic.as_str()).map(Vec::as_slice) else { continue };
+        if !programs.get(src).is_some_and(|(_, sp)| sp.is_some_and(|s| s.name == "beamformer")) {
+            continue;
+        }
+        let (Some(dv), Some(bv)) = (params_json.get(name), params_json.get(src)) else { continue };
+        let (Ok(d), Ok(b)) = (
+            crate::kinds::parse::<crate::node_doppler::DopplerNodeParams>(dv),
+            crate::kinds::parse::<crate::node_beamform::BeamformerParams>(bv),
+        ) else {
+            continue;
+        };
+        if let Some(a) = &d.aperture {
+            if a.fnumber.to_bits() != b.fnumber.to_bits() {
+                errors.push(format!(
+                    "nodes.{name}.params.aperture.fnumber = {} but its beamformer `{src}` has fnumber = {}: they must match (the per-pixel Doppler projections follow the beamformer's aperture)",
+                    a.fnumber, b.fnumber
+                ));
+            }
+            if a.apodization != b.apodization {
+                errors.push(format!(
+                    "nodes.{name}.params.aperture.apodization = \"{}\" but its beamformer `{src}` has apodization = \"{}\": they must match (the per-pixel Doppler projections weight the elements as the beamformer does)",
+                    format!("{:?}", a.apodization).to_lowercase(),
+                    format!("{:?}", b.apodization).to_lowercase()
+                ));
+            }
+        }
+    }
+
     // QoS.
     let mut topics_qos = BTreeMap::new();
     for (name, t) in &file.topics {
@@ -739,5 +774,51 @@ kind = "recorder"
         })
         .unwrap_err();
         assert_eq!(errs.len(), 4, "{errs:#?}");
+    }
+
+    /// A Doppler node's `aperture` must describe the beamformer that feeds it.
+    #[test]
+    fn doppler_aperture_must_match_its_beamformer() {
+        let g = |bf: &str, ap: &str| {
+            let text = format!(
+                r#"
+[graph]
+name = "g"
+[topics]
+rf = {{ type = "RfFrameV1", max_elements = 1024 }}
+iq = {{ type = "IqFrameV1", max_elements = 1024 }}
+vector = {{ type = "VectorFieldV1", max_elements = 4096 }}
+[nodes.src]
+kind = "test-source"
+outputs = {{ rf = "rf" }}
+[nodes.bf]
+kind = "beamformer"
+inputs = {{ rf = "rf" }}
+outputs = {{ iq = "iq" }}
+params = {{ {bf} }}
+[nodes.dop]
+kind = "doppler"
+inputs = {{ iq = "iq" }}
+outputs = {{ vector = "vector" }}
+params = {{ aperture = {{ pitch = 3e-4, n_elements = 128, {ap} }} }}
+[nodes.rec]
+kind = "recorder"
+"#
+            );
+            resolve(toml::from_str(&text).unwrap(), Path::new("."), &Overrides::default())
+        };
+        assert!(g(r#"fnumber = 2.5, apodization = "hann""#, r#"fnumber = 2.5, apodization = "hann""#).is_ok());
+        // defaults on both sides: f-number 1.5, boxcar
+        assert!(g("", "fnumber = 1.5").is_ok());
+        let errs = g(r#"fnumber = 2.5, apodization = "hann""#, "fnumber = 3.0").unwrap_err();
+        assert_eq!(errs.len(), 2, "{errs:#?}");
+        assert!(
+            errs[0].contains("nodes.dop.params.aperture.fnumber = 3 but its beamformer `bf` has fnumber = 2.5"),
+            "{errs:?}"
+        );
+        assert!(
+            errs[1].contains(r#"aperture.apodization = "boxcar" but its beamformer `bf` has apodization = "hann""#),
+            "{errs:?}"
+        );
     }
 }

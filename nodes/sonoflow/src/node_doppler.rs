@@ -63,6 +63,10 @@ pub struct ApertureParams {
     /// hence the Doppler shift, follows the strong (near-normal) elements. Absent: equal weights.
     #[serde(default)]
     pub width: Option<f64>,
+    /// Receive apodisation, as the beamformer's `apodization` (`boxcar` default, or `hann`): the
+    /// element weights of the mean receive direction.
+    #[serde(default)]
+    pub apodization: sonoflow_beamform::Apodization,
 }
 
 impl Default for DopplerNodeParams {
@@ -152,24 +156,24 @@ pub fn aperture_projection(
             let (mut sw, mut ss, mut sc) = (0.0f64, 0.0f64, 0.0f64);
             for &e in &xe {
                 let dx = x - e;
-                let inside = if rx == 0.0 {
-                    dx.abs() <= z / 2.0 / a.fnumber
-                } else {
-                    (dx - z * tan_rx).abs() <= z / cos_rx / 2.0 / a.fnumber
-                };
+                // offset from the aperture's centre and its half-width (the beamformer's rule)
+                let (off, half) =
+                    if rx == 0.0 { (dx, z / 2.0 / a.fnumber) } else { (dx - z * tan_rx, z / cos_rx / 2.0 / a.fnumber) };
                 let r = dx.hypot(z);
-                if !inside || r <= 0.0 {
+                if off.abs() > half || r <= 0.0 {
                     continue;
                 }
+                let aw = a.apodization.weight(-off / (2.0 * half));
                 let (sin_t, cos_t) = (dx / r, z / r);
-                let w = match a.width {
-                    None => 1.0,
-                    Some(width) => {
-                        let u = std::f64::consts::PI * width * sin_t / lambda;
-                        let sinc = if u.abs() < 1e-12 { 1.0 } else { u.sin() / u };
-                        (sinc * cos_t).abs() / r.sqrt()
-                    }
-                };
+                let w = aw
+                    * match a.width {
+                        None => 1.0,
+                        Some(width) => {
+                            let u = std::f64::consts::PI * width * sin_t / lambda;
+                            let sinc = if u.abs() < 1e-12 { 1.0 } else { u.sin() / u };
+                            (sinc * cos_t).abs() / r.sqrt()
+                        }
+                    };
                 sw += w;
                 ss += w * sin_t;
                 sc += w * cos_t;
@@ -517,12 +521,18 @@ pub fn run_doppler_loupas(kit: Kit) -> anyhow::Result<()> {
 mod tests {
     use super::*;
     use crate::node_beamform::validate_beamformer;
-    use sonoflow_beamform::{DasParams, DasPlan, Interpolation, TxWave};
+    use sonoflow_beamform::{Apodization, DasParams, DasPlan, Interpolation, TxWave};
     use sonoflow_messages::GridV1;
 
     #[test]
     fn aperture_projection_is_nominal_inside_the_array_and_clipped_at_its_edge() {
-        let a = ApertureParams { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5, width: None };
+        let a = ApertureParams {
+            pitch: 0.3e-3,
+            n_elements: 128,
+            fnumber: 1.5,
+            width: None,
+            apodization: Apodization::Boxcar,
+        };
         // Two pixels at 20 mm depth: x = 0 (both ±15° sub-apertures inside the 38 mm array) and
         // x = 12 mm (the −15° sub-aperture, centred at x + 5.4 mm, is clipped by the edge at 19 mm).
         let grid = Grid { x0: 0.0, z0: 0.02, dx: 12e-3, dz: 1e-3, nx: 2, nz: 1 };
@@ -536,23 +546,36 @@ mod tests {
         assert!(
             aperture_projection(&ApertureParams { fnumber: 0.0, ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).is_err()
         );
-        // Same aperture rule as the beamformer's DAS plan: its mean delay gradient gives the same
-        // equal-weight projection (float32 gradients: 1e-4).
-        let dp = DasParams {
-            fc: 5e6,
-            c: 1540.0,
-            fs: 20e6,
-            t0: 0.0,
-            pitch: a.pitch,
-            n_elements: a.n_elements,
-            fnumber: a.fnumber,
-            rx_angle: rx,
-            interpolation: Interpolation::Linear,
-        };
-        let plan = DasPlan::new(&dp, &TxWave::PlaneWave { tilt: 0.0 }, &grid, 4000).unwrap().projection();
-        for (q, r) in p.iter().zip(&plan) {
-            assert!((q[0] - r[0]).abs() < 1e-4 && (q[1] - r[1]).abs() < 1e-4, "{p:?} vs {plan:?}");
+        // Same aperture rule and element weights as the beamformer's DAS plan: its (apodisation-
+        // weighted) mean delay gradient gives the same projection (float32 gradients: 1e-4), for
+        // equal weights and for the Hann window, which leans on the central elements (a_x closer
+        // to nominal than with equal weights).
+        let mut hann = Vec::new();
+        for apodization in [Apodization::Boxcar, Apodization::Hann] {
+            let dp = DasParams {
+                fc: 5e6,
+                c: 1540.0,
+                fs: 20e6,
+                t0: 0.0,
+                pitch: a.pitch,
+                n_elements: a.n_elements,
+                fnumber: a.fnumber,
+                rx_angle: rx,
+                interpolation: Interpolation::Linear,
+                apodization,
+            };
+            let q =
+                aperture_projection(&ApertureParams { apodization, ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+            let plan = DasPlan::new(&dp, &TxWave::PlaneWave { tilt: 0.0 }, &grid, 4000).unwrap().projection();
+            for (q, r) in q.iter().zip(&plan) {
+                assert!((q[0] - r[0]).abs() < 1e-4 && (q[1] - r[1]).abs() < 1e-4, "{apodization:?}: {q:?} vs {plan:?}");
+            }
+            hann = q;
         }
+        assert!(
+            hann[0] != p[0] && (f64::from(hann[0][0]) - nom[0]).abs() < (f64::from(p[0][0]) - nom[0]).abs(),
+            "{hann:?} vs {p:?}"
+        );
         // Amplitude weights (element width 0.265 mm at 5 MHz): the oblique elements of the −15°
         // sub-aperture receive less, so the effective receive angle and |a_x| are smaller.
         let wp =

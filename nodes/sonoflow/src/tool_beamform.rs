@@ -66,6 +66,8 @@ pub struct ToolParam {
     pub rx_angle: Option<f64>,
     /// DAS interpolation.
     pub interpolation: Option<Interpolation>,
+    /// Receive apodisation (`boxcar`, MUST's, or `hann`).
+    pub apodization: Option<sonoflow_beamform::Apodization>,
     /// Pulse repetition frequency (Hz, MUST `PRF`).
     #[serde(alias = "PRF")]
     pub prf: Option<f64>,
@@ -419,6 +421,7 @@ pub fn run_das(a: &DasArgs) -> anyhow::Result<i32> {
         fnumber: p.fnumber.unwrap_or(0.0),
         rx_angle,
         interpolation: p.interpolation.unwrap_or_default(),
+        apodization: p.apodization.unwrap_or_default(),
     };
     let tx = TxWave::PlaneWave { tilt: tx_tilt };
     let start = std::time::Instant::now();

@@ -173,6 +173,7 @@ fn das_tool_matches_the_library() {
         fnumber: 1.5,
         rx_angle: (-15f64).to_radians(),
         interpolation: Interpolation::Linear,
+        apodization: Default::default(),
     };
     let plan = DasPlan::new(&params, &TxWave::PlaneWave { tilt: 5f64.to_radians() }, &grid, ns).unwrap();
     let expect = plan.apply_to_vec(&to_element_major(&iq, ns, ne).unwrap()).unwrap();

@@ -95,6 +95,7 @@ pub fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
         fnumber,
         rx_angle,
         interpolation: Interpolation::Linear,
+        apodization: Default::default(),
     }
 }
 

@@ -156,6 +156,7 @@ fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
         fnumber,
         rx_angle,
         interpolation: Interpolation::Linear,
+        apodization: Default::default(),
     }
 }
 
