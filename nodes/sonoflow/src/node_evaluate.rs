@@ -446,12 +446,17 @@ pub fn markdown(e: &Evaluation) -> String {
         );
         let _ = writeln!(s, "| tx | rx | fc (MHz) | pixels | bias | RMS | \\|e\\|₇₅ | gain |");
         let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---:|---:|");
+        // angles to 0.01° without trailing zeros (−3.75°, 7.5°, 0°)
+        let deg = |a: f64| {
+            let r = (a * 100.0).round() / 100.0;
+            format!("{}", if r == 0.0 { 0.0 } else { r })
+        };
         for l in &e.looks {
             let _ = writeln!(
                 s,
-                "| {:.1}° | {:.1}° | {:.2} | {} | {:+.2} % | {:.2} % | {:.2} % | {} |",
-                l.tx_angle_deg,
-                l.rx_angle_deg,
+                "| {}° | {}° | {:.2} | {} | {:+.2} % | {:.2} % | {:.2} % | {} |",
+                deg(l.tx_angle_deg),
+                deg(l.rx_angle_deg),
                 l.fc / 1e6,
                 l.pixels - l.no_estimate,
                 100.0 * l.error.bias,
@@ -821,7 +826,7 @@ mod tests {
         assert!(want.abs() > 1e-3);
         // the report's table
         let md = markdown(&Evaluation { looks: out.clone(), ..Default::default() });
-        assert!(md.contains("Per look") && md.contains("| 0.0° | -15.0° | 5.00 |") && md.contains("1.050"), "{md}");
+        assert!(md.contains("Per look") && md.contains("| 0° | -15° | 5.00 |") && md.contains("1.050"), "{md}");
         // a map on another grid
         let mut other = (h, d);
         other.0.grid.nx = 11;

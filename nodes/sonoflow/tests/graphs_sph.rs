@@ -152,7 +152,7 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
     let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(report.contains("sph-flow") && report.contains("Error against ground truth"), "{report}");
     // sonoflow's branch on the same RF (five receive angles in a sub-band below the grating-lobe
-    // onset and three near-normal ones at 5 MHz, Hann receive apodisation at F# 2.5, fc²-weighted
+    // onset and five near-normal ones at 5 MHz, Hann receive apodisation at F# 2.5, fc²-weighted
     // vector solve, divergence-free regulariser with the no-slip wall): the paper chain's lateral
     // bias (grating lobes of the ±15° sub-apertures: measured −8.4 %) is gone (−0.3 %) and the
     // lateral |e|75 drops from 18.2 to 3.1 % (z: 2.5 → 1.0 %); asserted with margins for seeds
