@@ -18,7 +18,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::kinds::{DopplerMap, VectorField};
-use sonoflow_messages::{plane, DopplerMapHeaderV1, VectorFieldHeaderV1};
+use sonoflow_messages::{plane, DopplerMapHeaderV1, GridV1, VectorFieldHeaderV1};
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Input, Kit};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -104,18 +104,20 @@ pub struct Evaluation {
 type Field = (VectorFieldHeaderV1, Vec<f32>);
 type Map = (DopplerMapHeaderV1, Vec<f32>);
 
-fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
-    let n = h.grid.nx as usize * h.grid.nz as usize;
-    let np = (h.n_planes as usize).min(h.plane_ids.len());
-    let k = h.plane_ids[..np].iter().position(|&p| p == id)?;
+/// Plane `id` of a payload of `n_planes` planes on `grid`, as listed in `plane_ids`.
+fn find_plane<'a>(grid: &GridV1, n_planes: u32, plane_ids: &[u32; 8], data: &'a [f32], id: u32) -> Option<&'a [f32]> {
+    let n = grid.nx as usize * grid.nz as usize;
+    let np = (n_planes as usize).min(plane_ids.len());
+    let k = plane_ids[..np].iter().position(|&p| p == id)?;
     data.get(k * n..(k + 1) * n)
 }
 
+fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
+    find_plane(&h.grid, h.n_planes, &h.plane_ids, data, id)
+}
+
 fn map_plane<'a>(h: &DopplerMapHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
-    let n = h.grid.nx as usize * h.grid.nz as usize;
-    let np = (h.n_planes as usize).min(h.plane_ids.len());
-    let k = h.plane_ids[..np].iter().position(|&p| p == id)?;
-    data.get(k * n..(k + 1) * n)
+    find_plane(&h.grid, h.n_planes, &h.plane_ids, data, id)
 }
 
 /// One look's errors pooled over packets: (tx, rx, fc), errors, projected truths, pixels, pixels
@@ -275,11 +277,7 @@ pub fn write_figures(
             let panels: Vec<figures::DopplerPanel> = maps
                 .iter()
                 .map(|(h, d)| {
-                    let n = h.grid.nx as usize * h.grid.nz as usize;
-                    let np = (h.n_planes as usize).min(h.plane_ids.len());
-                    let plane = |id: u32| {
-                        h.plane_ids[..np].iter().position(|&p| p == id).and_then(|k| d.get(k * n..(k + 1) * n))
-                    };
+                    let plane = |id: u32| map_plane(h, d, id);
                     let velocity = plane(plane::VELOCITY)
                         .ok_or_else(|| anyhow::anyhow!("map of packet {} has no `velocity` plane", h.packet))?;
                     Ok(figures::DopplerPanel {
