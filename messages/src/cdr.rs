@@ -8,7 +8,7 @@
 //! `header = data[4 : 4 + header_size]`, `n = uint32 at 4 + header_size`,
 //! `payload = data[8 + header_size :]`.
 
-use crate::kinds::{MessageKind, WireMessage};
+use crate::types::{MessageType, WireMessage};
 
 /// CDR encapsulation: representation id 0x0001 = CDR little-endian, options 0.
 pub const ENCAPSULATION: [u8; 4] = [0, 1, 0, 0];
@@ -17,13 +17,13 @@ pub const ENCAPSULATION: [u8; 4] = [0, 1, 0, 0];
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum DecodeError {
     #[error("{kind} record too short: {len} bytes, need at least {need}")]
-    TooShort { kind: MessageKind, len: usize, need: usize },
+    TooShort { kind: MessageType, len: usize, need: usize },
     #[error("{kind} record has encapsulation {found:?}, expected CDR little-endian {ENCAPSULATION:?}")]
-    Encapsulation { kind: MessageKind, found: [u8; 4] },
+    Encapsulation { kind: MessageType, found: [u8; 4] },
     #[error("{kind} record declares {declared} elements but carries {bytes} payload bytes (element size {elem})")]
-    Length { kind: MessageKind, declared: usize, bytes: usize, elem: usize },
+    Length { kind: MessageType, declared: usize, bytes: usize, elem: usize },
     #[error("{kind} record: header dimensions imply {expected} elements, payload has {found}")]
-    Dimensions { kind: MessageKind, expected: usize, found: usize },
+    Dimensions { kind: MessageType, expected: usize, found: usize },
 }
 
 /// Byte length of the record of a message with `n` elements.
@@ -46,7 +46,7 @@ pub fn encode_bytes_into(header: &[u8], n_elems: usize, payload: &[u8], out: &mu
 }
 
 /// Splits a record into (header bytes, payload bytes) after checking its structure.
-pub fn split(kind: MessageKind, data: &[u8]) -> Result<(&[u8], &[u8]), DecodeError> {
+pub fn split(kind: MessageType, data: &[u8]) -> Result<(&[u8], &[u8]), DecodeError> {
     let hs = kind.header_size();
     let es = kind.elem_size();
     let need = 8 + hs;
@@ -68,13 +68,13 @@ pub fn split(kind: MessageKind, data: &[u8]) -> Result<(&[u8], &[u8]), DecodeErr
 
 /// Decodes a record into an owned header and payload (copies; the record may be unaligned).
 pub fn decode<M: WireMessage>(data: &[u8]) -> Result<(M::Header, Vec<M::Elem>), DecodeError> {
-    let (h, p) = split(M::KIND, data)?;
+    let (h, p) = split(M::TYPE, data)?;
     let header: M::Header = bytemuck::pod_read_unaligned(h);
     let payload: Vec<M::Elem> = bytemuck::pod_collect_to_vec(p);
     if let Some(expected) = M::expected_len(&header) {
         let eos = M::common(&header).flags & crate::wire::FLAG_END_OF_STREAM != 0;
         if expected != payload.len() && !(eos && payload.is_empty()) {
-            return Err(DecodeError::Dimensions { kind: M::KIND, expected, found: payload.len() });
+            return Err(DecodeError::Dimensions { kind: M::TYPE, expected, found: payload.len() });
         }
     }
     Ok((header, payload))

@@ -17,10 +17,10 @@
 //! time of validity `t_valid` in seconds of simulation/acquisition time.
 
 pub mod cdr;
-pub mod kinds;
 pub mod ros;
+pub mod types;
 pub mod viz;
 pub mod wire;
 
-pub use kinds::{MessageKind, WireMessage};
+pub use types::{MessageType, WireMessage};
 pub use wire::*;

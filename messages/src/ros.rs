@@ -56,8 +56,8 @@ macro_rules! wire_struct {
     ($(#[$m:meta])* pub struct $name:ident as $ros:literal { $( $(#[$fm:meta])* pub $f:ident : $t:ty ),* $(,)? }) => {
         $(#[$m])*
         #[repr(C)]
-        #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable, iceoryx2::prelude::ZeroCopySend)]
-        #[type_name($ros)]
+        #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+        #[cfg_attr(feature = "ipc", derive(iceoryx2::prelude::ZeroCopySend), type_name($ros))]
         pub struct $name { $( $(#[$fm])* pub $f: $t ),* }
         impl Default for $name {
             fn default() -> Self { bytemuck::Zeroable::zeroed() }

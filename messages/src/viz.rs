@@ -3,7 +3,7 @@
 //! (real geometry, one FLOAT32 field per plane), beamformed I/Q → `foxglove.RawImage` (B-mode,
 //! mono8, 60 dB dynamic range). RF frames have no picture (raw record only).
 
-use crate::kinds::{MessageKind, WireMessage};
+use crate::types::{MessageType, WireMessage};
 use crate::wire::*;
 use foxglove::schemas::{packed_element_field::NumericType, PackedElementField, Pose, Quaternion, Vector2, Vector3};
 use foxglove::Encode;
@@ -46,9 +46,9 @@ fn field(name: &str, offset: u32) -> PackedElementField {
 }
 
 /// Picture of a message, if its kind has one. `header`/`payload` are the raw wire bytes.
-pub fn viz(kind: MessageKind, header: &[u8], payload: &[u8]) -> Option<VizMessage> {
+pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessage> {
     match kind {
-        MessageKind::ParticleSnapshotV1 => {
+        MessageType::ParticleSnapshotV1 => {
             let h: ParticleSnapshotHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
             // Particle layout: id u32, kind u32, x, z, vx, vz, amplitude (f32). Depth z is drawn
             // as -y so the image reads top-down like an ultrasound image.
@@ -68,15 +68,15 @@ pub fn viz(kind: MessageKind, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageKind::DopplerMapV1 => {
+        MessageType::DopplerMapV1 => {
             let h: DopplerMapHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
-        MessageKind::VectorFieldV1 => {
+        MessageType::VectorFieldV1 => {
             let h: VectorFieldHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
-        MessageKind::IqFrameV1 => {
+        MessageType::IqFrameV1 => {
             let h: IqFrameHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
             let iq: Vec<Complex32> = bytemuck::pod_collect_to_vec(payload);
             let (nx, nz) = (h.grid.nx as usize, h.grid.nz as usize);
@@ -102,7 +102,7 @@ pub fn viz(kind: MessageKind, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageKind::RfFrameV1 | MessageKind::StageStatsV1 | MessageKind::FlowStatsV1 => None,
+        MessageType::RfFrameV1 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
     }
 }
 

@@ -2,6 +2,7 @@
 //! the `reserved` words (and bump `schema_minor`) or create a `…V2` type.
 
 use crate::wire_struct;
+#[cfg(feature = "ipc")]
 #[allow(unused_imports)]
 use iceoryx2::prelude::ZeroCopySend;
 

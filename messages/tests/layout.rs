@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used)]
 #![allow(clippy::field_reassign_with_default)]
 //! Pins the wire layout: a change here is a protocol change (bump the type name to `…V2`).
-use sonoflow_messages::kinds::*;
+use sonoflow_messages::types::*;
 use sonoflow_messages::*;
 use std::mem::{align_of, offset_of, size_of};
 
@@ -19,7 +19,7 @@ fn sizes_are_pinned() {
     assert_eq!(size_of::<StageStatsHeaderV1>(), 128);
     assert_eq!(size_of::<FlowStatsHeaderV1>(), 160);
     assert_eq!(size_of::<BoundaryFluxV1>(), 32);
-    for k in MessageKind::ALL {
+    for k in MessageType::ALL {
         // CDR needs every header to be a multiple of 8 so the u32 count is 4-aligned and
         // the payload starts on its natural alignment.
         assert_eq!(k.header_size() % 8, 0, "{k}");
@@ -64,7 +64,7 @@ fn offsets_are_pinned() {
 /// of the primitive sizes equals the struct size (so CDR = the raw bytes, see `cdr`).
 #[test]
 fn ros_schema_matches_struct() {
-    let text = MessageKind::RfFrameV1.schema_text();
+    let text = MessageType::RfFrameV1.schema_text();
     assert!(text.starts_with("sonoflow_msgs/RfFrameHeaderV1 header\nfloat32[] data\n"), "{text}");
     assert!(text.contains("MSG: sonoflow_msgs/MsgHeaderV1\nuint64 seq\nuint64 frame_id\nfloat64 t_valid\n"));
     assert!(text.contains("float32[256] tx_delays\n"));
@@ -78,7 +78,7 @@ fn ros_schema_matches_struct() {
         }
     }
     // Size of every nested message computed from its schema text alone.
-    for kind in MessageKind::ALL {
+    for kind in MessageType::ALL {
         let text = kind.schema_text();
         let mut sizes = std::collections::HashMap::<String, usize>::new();
         let sections: Vec<&str> = text.split(&"=".repeat(80)).collect();
@@ -131,7 +131,7 @@ fn cdr_round_trip_and_errors() {
     cdr::encode_into::<RfFrame>(&h, &payload[..14], &mut bad);
     assert!(matches!(cdr::decode::<RfFrame>(&bad), Err(cdr::DecodeError::Dimensions { .. })));
     bad[1] = 0;
-    assert!(matches!(cdr::split(MessageKind::RfFrameV1, &bad), Err(cdr::DecodeError::Encapsulation { .. })));
+    assert!(matches!(cdr::split(MessageType::RfFrameV1, &bad), Err(cdr::DecodeError::Encapsulation { .. })));
 }
 
 #[test]
@@ -143,7 +143,7 @@ fn viz_pictures_have_the_grid_geometry() {
     h.plane_ids[0] = plane::VX;
     h.plane_ids[1] = plane::VZ;
     let payload: Vec<f32> = (0..12).map(|i| i as f32).collect();
-    let v = viz::viz(MessageKind::VectorFieldV1, bytemuck::bytes_of(&h), bytemuck::cast_slice(&payload)).unwrap();
+    let v = viz::viz(MessageType::VectorFieldV1, bytemuck::bytes_of(&h), bytemuck::cast_slice(&payload)).unwrap();
     assert_eq!(v.schema_name, "foxglove.Grid");
     let g = foxglove::schemas::Grid::decode(&v.data[..]).unwrap();
     assert_eq!(g.column_count, 3);

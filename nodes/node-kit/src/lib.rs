@@ -18,6 +18,8 @@
 //!   statistics ([`Kit::finish`]).
 
 pub mod config;
+pub mod receive;
+pub mod spec;
 
 pub use config::{NodeConfig, TopicQos, NODE_CONFIG_ENV};
 use iceoryx2::port::publisher::Publisher;
@@ -26,8 +28,10 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{listener::Listener, notifier::Notifier};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
-use sonoflow_messages::kinds::{StageStats, WireMessage};
-use sonoflow_messages::{MessageKind, MsgHeaderV1, StageStatsHeaderV1, FLAG_END_OF_STREAM};
+pub use receive::{for_each, select_loop, Flow, SelectEnd, Step, Wakeup};
+use sonoflow_messages::types::{StageStats, WireMessage};
+use sonoflow_messages::{MessageType, MsgHeaderV1, StageStatsHeaderV1, FLAG_END_OF_STREAM};
+pub use spec::{in_range, parse_params, port, KindSpec, PortDir, PortSpec, STATS_TOPIC};
 use std::mem::MaybeUninit;
 use std::time::{Duration, Instant};
 
@@ -150,12 +154,12 @@ pub struct TopicServices<M: WireMessage> {
 impl<M: WireMessage> TopicServices<M> {
     /// Opens or creates the services of `qos.topic`.
     pub fn open(node: &Node<Svc>, run_id: &str, qos: &TopicQos) -> Result<Self, KitError> {
-        if qos.kind != M::KIND.name() {
+        if qos.message_type != M::TYPE.name() {
             return Err(KitError::Config(format!(
                 "topic `{}` carries {} but the port expects {}",
                 qos.topic,
-                qos.kind,
-                M::KIND.name()
+                qos.message_type,
+                M::TYPE.name()
             )));
         }
         let ctx = format!("topic `{}`", qos.topic);
@@ -505,9 +509,9 @@ impl<M: WireMessage> Input<M> {
         Ok(())
     }
 
-    /// The listener (to attach several inputs to one WaitSet).
-    pub fn listener(&self) -> std::rc::Rc<Listener<Svc>> {
-        self.listener.clone()
+    /// The event this input's messages raise (for [`select_loop`] over several inputs).
+    pub fn wakeup(&self) -> Wakeup {
+        Wakeup(self.listener.clone())
     }
 }
 
@@ -717,30 +721,30 @@ impl Kit {
 /// Opens (creating if needed) the services of a topic of any kind and keeps them alive while
 /// the returned handle lives (the launcher holds every topic of the graph).
 pub fn open_topic_services(node: &Node<Svc>, run_id: &str, qos: &TopicQos) -> Result<Box<dyn std::any::Any>, KitError> {
-    let kind = MessageKind::from_name(&qos.kind)
-        .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.kind)))?;
-    sonoflow_messages::with_kind!(kind, M => Ok(Box::new(TopicServices::<M>::open(node, run_id, qos)?) as Box<dyn std::any::Any>))
+    let kind = MessageType::from_name(&qos.message_type)
+        .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.message_type)))?;
+    sonoflow_messages::with_type!(kind, M => Ok(Box::new(TopicServices::<M>::open(node, run_id, qos)?) as Box<dyn std::any::Any>))
 }
 
 /// A type-erased input (recorder: one per recorded topic, whatever its kind).
 pub trait DynInput: Handshake {
     /// Message kind of the topic.
-    fn kind(&self) -> MessageKind;
+    fn kind(&self) -> MessageType;
     /// Topic name.
     fn topic_name(&self) -> &str;
     /// Takes one message and hands `f` its header and payload bytes (still in shared memory).
     /// Returns `None` when the queue is empty, `Some(true)` for an end-of-stream marker (not
     /// passed to `f`), `Some(false)` after `f` ran.
     fn receive_with(&mut self, f: &mut BytesFn<'_>) -> Result<Option<bool>, KitError>;
-    /// The data-event listener (for a WaitSet).
-    fn listener_rc(&self) -> std::rc::Rc<Listener<Svc>>;
+    /// The event this input's messages raise (for [`select_loop`]).
+    fn wakeup(&self) -> Wakeup;
     /// (received, gaps, end of stream seen)
     fn counters(&self) -> (u64, u64, bool);
 }
 
 impl<M: WireMessage> DynInput for Input<M> {
-    fn kind(&self) -> MessageKind {
-        M::KIND
+    fn kind(&self) -> MessageType {
+        M::TYPE
     }
     fn topic_name(&self) -> &str {
         self.topic()
@@ -757,8 +761,8 @@ impl<M: WireMessage> DynInput for Input<M> {
             }
         }
     }
-    fn listener_rc(&self) -> std::rc::Rc<Listener<Svc>> {
-        self.listener.clone()
+    fn wakeup(&self) -> Wakeup {
+        Wakeup(self.listener.clone())
     }
     fn counters(&self) -> (u64, u64, bool) {
         (self.received, self.gaps, self.eos)
@@ -768,7 +772,7 @@ impl<M: WireMessage> DynInput for Input<M> {
 /// A type-erased output (replay: one per replayed topic).
 pub trait DynOutput: Handshake {
     /// Message kind of the topic.
-    fn kind(&self) -> MessageKind;
+    fn kind(&self) -> MessageType;
     /// Topic name.
     fn topic_name(&self) -> &str;
     /// Publishes a message from raw header and payload bytes, keeping the header as given
@@ -781,8 +785,8 @@ pub trait DynOutput: Handshake {
 }
 
 impl<M: WireMessage> DynOutput for Output<M> {
-    fn kind(&self) -> MessageKind {
-        M::KIND
+    fn kind(&self) -> MessageType {
+        M::TYPE
     }
     fn topic_name(&self) -> &str {
         self.topic()
@@ -794,7 +798,7 @@ impl<M: WireMessage> DynOutput for Output<M> {
                 detail: format!(
                     "header of {} bytes, {} expects {}",
                     header.len(),
-                    M::KIND,
+                    M::TYPE,
                     std::mem::size_of::<M::Header>()
                 ),
             });
@@ -812,17 +816,17 @@ impl<M: WireMessage> DynOutput for Output<M> {
 }
 
 impl Kit {
-    /// Opens a type-erased input on `qos.topic` (kind from `qos.kind`).
+    /// Opens a type-erased input on `qos.topic` (kind from `qos.message_type`).
     pub fn dyn_input(&self, qos: &TopicQos) -> Result<Box<dyn DynInput>, KitError> {
-        let kind = MessageKind::from_name(&qos.kind)
-            .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.kind)))?;
-        sonoflow_messages::with_kind!(kind, M => Ok(Box::new(self.input_for::<M>(qos)?) as Box<dyn DynInput>))
+        let kind = MessageType::from_name(&qos.message_type)
+            .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.message_type)))?;
+        sonoflow_messages::with_type!(kind, M => Ok(Box::new(self.input_for::<M>(qos)?) as Box<dyn DynInput>))
     }
 
     /// Opens a type-erased output on `qos.topic`.
     pub fn dyn_output(&self, qos: &TopicQos) -> Result<Box<dyn DynOutput>, KitError> {
-        let kind = MessageKind::from_name(&qos.kind)
-            .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.kind)))?;
-        sonoflow_messages::with_kind!(kind, M => Ok(Box::new(self.output_for::<M>(qos)?) as Box<dyn DynOutput>))
+        let kind = MessageType::from_name(&qos.message_type)
+            .ok_or_else(|| KitError::Config(format!("topic `{}`: unknown kind {}", qos.topic, qos.message_type)))?;
+        sonoflow_messages::with_type!(kind, M => Ok(Box::new(self.output_for::<M>(qos)?) as Box<dyn DynOutput>))
     }
 }

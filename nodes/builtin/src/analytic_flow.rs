@@ -1,0 +1,153 @@
+//! `analytic-flow` node: thin wiring of `sonoflow-analytic-flow` — particle snapshots at every
+//! acquisition time, the exact velocity field on a grid once per packet (at its mid time).
+
+use sonoflow_analytic_flow::{AnalyticFlow, AnalyticFlowParams, GridSpec};
+use sonoflow_messages::types::{ParticleSnapshot, VectorField};
+use sonoflow_messages::MessageType::*;
+use sonoflow_messages::*;
+use sonoflow_node_kit::parse_params;
+use sonoflow_node_kit::PortDir::*;
+use sonoflow_node_kit::{port, KindSpec};
+use sonoflow_node_kit::{thread_cpu_ns, Kit};
+
+/// The `analytic-flow` node kind.
+pub const SPEC: KindSpec = KindSpec {
+        name: "analytic-flow",
+        about: "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk, plug band) at the acquisition times, plus the exact field as ground truth",
+        ports: &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate,
+        check_wiring: None,
+        input_files: &[],
+        run,
+};
+
+/// Default ground-truth grid: 20 mm × 20 mm from 10 mm depth, 0.25 mm spacing.
+pub fn default_truth_grid() -> GridSpec {
+    GridSpec { nx: 81, nz: 81, x0: -0.01, z0: 0.01, dx: 0.25e-3, dz: 0.25e-3 }
+}
+
+/// Splits the node params into the library's params and the truth grid.
+pub fn split_params(v: &serde_json::Value) -> Result<(AnalyticFlowParams, GridSpec), String> {
+    let mut v = if v.is_null() { serde_json::json!({}) } else { v.clone() };
+    let grid = match v.as_object_mut().and_then(|o| o.remove("truth_grid")) {
+        Some(g) => serde_json::from_value::<GridSpec>(g).map_err(|e| format!("truth_grid: {e}"))?,
+        None => default_truth_grid(),
+    };
+    let p: AnalyticFlowParams = parse_params(&v)?;
+    p.validate().map_err(|e| e.to_string())?;
+    grid.validate().map_err(|e| format!("truth_grid: {e}"))?;
+    Ok((p, grid))
+}
+
+pub fn validate(v: &serde_json::Value) -> Result<(), String> {
+    split_params(v).map(|_| ())
+}
+
+pub fn run(mut kit: Kit) -> anyhow::Result<()> {
+    let (params, grid) = split_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut flow = AnalyticFlow::new(&params)?;
+    let mut out = kit.output::<ParticleSnapshot>("particles")?;
+    let mut truth_out = match kit.cfg.outputs.contains_key("truth") {
+        true => Some(kit.output::<VectorField>("truth")?),
+        false => None,
+    };
+    let n = flow.particles().len();
+    if n > out.max_elements() {
+        anyhow::bail!(
+            "the flow has {n} scatterers but topic `{}` allows max_elements = {}: raise it in the launch file or lower density_per_mm2",
+            out.topic(),
+            out.max_elements()
+        );
+    }
+    match truth_out.as_mut() {
+        Some(t) => kit.handshake(&mut [&mut out, t])?,
+        None => kit.handshake(&mut [&mut out])?,
+    }
+    let times = params.schedule.times();
+    let total = times.len() as u64;
+    let step = (total / 20).max(1);
+    let mut last_t = 0.0;
+    for (k, at) in times.iter().enumerate() {
+        if kit.check_termination().is_err() {
+            break;
+        }
+        let t0 = thread_cpu_ns();
+        flow.advance_to(at.t)?;
+        let ps = flow.particles();
+        let (mut xmin, mut xmax, mut zmin, mut zmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+        for i in 0..n {
+            xmin = xmin.min(ps.x[i]);
+            xmax = xmax.max(ps.x[i]);
+            zmin = zmin.min(ps.z[i]);
+            zmax = zmax.max(ps.z[i]);
+        }
+        let mut h = ParticleSnapshotHeaderV1 {
+            n_particles: n as u32,
+            n_fluid: n as u32,
+            bbox: [xmin, xmax, zmin, zmax],
+            packet: at.packet,
+            frame_in_packet: at.frame_in_packet,
+            packet_size: params.schedule.packet_size,
+            ..Default::default()
+        };
+        h.common.frame_id = at.frame_id;
+        h.common.t_valid = at.t;
+        out.publish_in_place(n, h, |dst| {
+            for (i, d) in dst.iter_mut().enumerate() {
+                d.write(ParticleV1 {
+                    id: ps.id[i],
+                    kind: PARTICLE_FLUID,
+                    x: ps.x[i],
+                    z: ps.z[i],
+                    vx: ps.vx[i],
+                    vz: ps.vz[i],
+                    amplitude: ps.amplitude[i],
+                    reserved: 0.0,
+                });
+            }
+        })?;
+        let compute = thread_cpu_ns() - t0;
+        kit.stats.messages_out += 1;
+        kit.stats.bytes_out += (n * 32) as u64;
+        kit.record(at.frame_id, at.t, compute)?;
+        last_t = at.t;
+
+        let packet_done = at.frame_in_packet + 1 == params.schedule.packet_size;
+        if let (true, Some(tout)) = (packet_done, truth_out.as_mut()) {
+            let t0 = thread_cpu_ns();
+            let truth = flow.sample_truth(&grid);
+            let nn = grid.nx as usize * grid.nz as usize;
+            let mut vh = VectorFieldHeaderV1 {
+                grid: GridV1 { x0: grid.x0, z0: grid.z0, dx: grid.dx, dz: grid.dz, nx: grid.nx, nz: grid.nz },
+                n_planes: 3,
+                source: VECTOR_TRUTH,
+                packet: at.packet,
+                converged: 1,
+                ..Default::default()
+            };
+            vh.plane_ids[..3].copy_from_slice(&[plane::VX, plane::VZ, plane::MASK]);
+            vh.common.frame_id = at.frame_id;
+            vh.common.t_valid = params.schedule.packet_mid_time(at.packet);
+            tout.publish_in_place(3 * nn, vh, |dst| {
+                for i in 0..nn {
+                    dst[i].write(truth.vx[i]);
+                    dst[nn + i].write(truth.vz[i]);
+                    dst[2 * nn + i].write(truth.mask[i] as f32);
+                }
+            })?;
+            kit.stats.messages_out += 1;
+            kit.record(at.frame_id, vh.common.t_valid, thread_cpu_ns() - t0)?;
+        }
+        if (k as u64 + 1).is_multiple_of(step) || k as u64 + 1 == total {
+            kit.progress(k as u64 + 1, total);
+        }
+    }
+    out.publish_eos(last_t)?;
+    if let Some(t) = truth_out.as_mut() {
+        t.publish_eos(last_t)?;
+    }
+    kit.finish()?;
+    Ok(())
+}

@@ -1,0 +1,81 @@
+//! `gain` node: multiplies RF frames by a constant — a minimal processing stage, and the model
+//! for external nodes (`sonoflow-external-nodes`).
+
+use serde::{Deserialize, Serialize};
+use sonoflow_messages::types::RfFrame;
+use sonoflow_messages::MessageType::*;
+use sonoflow_node_kit::PortDir::*;
+use sonoflow_node_kit::{for_each, Flow};
+use sonoflow_node_kit::{parse_params, thread_cpu_ns, Kit};
+use sonoflow_node_kit::{port, KindSpec};
+
+/// The `gain` node kind.
+pub const SPEC: KindSpec = KindSpec {
+    name: "gain",
+    about: "multiplies RF frames by a constant (a minimal processing stage)",
+    ports: &[port("rf_in", In, RfFrameV1, true), port("rf_out", Out, RfFrameV1, true)],
+    dynamic_inputs: false,
+    dynamic_outputs: false,
+    validate: validate_gain,
+    check_wiring: None,
+    input_files: &[],
+    run: run_gain,
+};
+
+/// `gain` parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GainParams {
+    /// Multiplier (finite).
+    pub gain: f32,
+}
+
+impl Default for GainParams {
+    fn default() -> Self {
+        Self { gain: 2.0 }
+    }
+}
+
+pub fn validate_gain(v: &serde_json::Value) -> Result<(), String> {
+    let p = parse_params::<GainParams>(v)?;
+    if !p.gain.is_finite() || p.gain.abs() > 1e30 {
+        return Err(format!("gain = {} is out of range: finite, |gain| <= 1e30", p.gain));
+    }
+    Ok(())
+}
+
+pub fn run_gain(mut kit: Kit) -> anyhow::Result<()> {
+    validate_gain(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let p: GainParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let mut input = kit.input::<RfFrame>("rf_in")?;
+    let mut out = kit.output::<RfFrame>("rf_out")?;
+    kit.handshake(&mut [&mut input, &mut out])?;
+    let mut last_t = 0.0;
+    for_each(&mut kit, &mut input, |kit, sample| {
+        let t0 = thread_cpu_ns();
+        let src = sample.payload();
+        let mut h = *sample.user_header();
+        // Fresh common header: keep the frame id and time of validity only.
+        h.common = sonoflow_messages::MsgHeaderV1 {
+            frame_id: h.common.frame_id,
+            t_valid: h.common.t_valid,
+            ..Default::default()
+        };
+        last_t = h.common.t_valid;
+        out.publish_in_place(src.len(), h, |dst| {
+            for (d, s) in dst.iter_mut().zip(src) {
+                d.write(s * p.gain);
+            }
+        })?;
+        let compute = thread_cpu_ns() - t0;
+        kit.stats.messages_in += 1;
+        kit.stats.messages_out += 1;
+        kit.stats.bytes_out += (src.len() * 4) as u64;
+        kit.record(h.common.frame_id, h.common.t_valid, compute)?;
+        Ok(Flow::Continue)
+    })?;
+    out.publish_eos(last_t)?;
+    kit.stats.gaps = input.gaps;
+    kit.finish()?;
+    Ok(())
+}

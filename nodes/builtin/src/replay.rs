@@ -1,0 +1,167 @@
+//! `replay` node: publishes recorded topics from an MCAP file into the graph. It becomes the
+//! producer of the topics it replays; downstream nodes cannot tell the difference, except for
+//! the `REPLAYED` flag. Headers keep their recorded sequence numbers, frame ids and times.
+//!
+//! Outputs map a recorded topic to a graph topic: `outputs = { rf = "rf" }`.
+//! `rate = 0` publishes as fast as the graph accepts (lossless, deterministic); `rate = 1`
+//! reproduces the recorded timing (recorder receive times), `2` twice as fast.
+
+use serde::{Deserialize, Serialize};
+use sonoflow_mcap_io::{McapReader, ReadOptions};
+use sonoflow_messages::{cdr, MessageType, FLAG_REPLAYED, FLAG_RESET};
+use sonoflow_node_kit::parse_params;
+use sonoflow_node_kit::KindSpec;
+use sonoflow_node_kit::{thread_cpu_ns, DynOutput, Kit};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The `replay` node kind.
+pub const SPEC: KindSpec = KindSpec {
+    name: "replay",
+    about: "publishes the topics of an MCAP recording into the graph (outputs: recorded topic = graph topic)",
+    ports: &[],
+    dynamic_inputs: false,
+    dynamic_outputs: true,
+    validate,
+    check_wiring: None,
+    input_files: &["path"],
+    run,
+};
+
+/// Replay parameters.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReplayParams {
+    /// MCAP file (relative paths: to the launch file's folder, then the working directory).
+    pub path: String,
+    /// Speed factor of the recorded timing; 0 = as fast as possible (lossless).
+    pub rate: f64,
+    /// How many times to play the file; 0 = until stopped.
+    pub loops: u32,
+    /// Skip this many seconds from the first recorded message.
+    pub start_offset_s: f64,
+}
+
+impl Default for ReplayParams {
+    fn default() -> Self {
+        Self { path: String::new(), rate: 0.0, loops: 1, start_offset_s: 0.0 }
+    }
+}
+
+impl ReplayParams {
+    pub fn validate(&self) -> Result<(), String> {
+        if self.path.is_empty() {
+            return Err("path is required (the MCAP file to replay)".into());
+        }
+        if !(self.rate.is_finite() && (0.0..=1000.0).contains(&self.rate)) {
+            return Err(format!("rate = {} is out of range: 0 (as fast as possible) ..= 1000", self.rate));
+        }
+        if !(self.start_offset_s.is_finite() && self.start_offset_s >= 0.0) {
+            return Err(format!("start_offset_s = {} is out of range: >= 0", self.start_offset_s));
+        }
+        Ok(())
+    }
+}
+
+pub fn validate(v: &serde_json::Value) -> Result<(), String> {
+    parse_params::<ReplayParams>(v)?.validate()
+}
+
+pub fn run(mut kit: Kit) -> anyhow::Result<()> {
+    let p: ReplayParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    p.validate().map_err(anyhow::Error::msg)?;
+    let reader = McapReader::open(Path::new(&p.path))?;
+    if !reader.is_complete() {
+        eprintln!("replay: {} is unfinished (no summary); replaying every complete chunk", p.path);
+    }
+    let recorded: BTreeMap<String, String> = reader.topics().into_iter().map(|t| (t.topic, t.schema_name)).collect();
+    let outputs_cfg = kit.cfg.outputs.clone();
+    let mut outs: BTreeMap<String, (MessageType, Box<dyn DynOutput>)> = BTreeMap::new();
+    for (rec_topic, qos) in &outputs_cfg {
+        let kind = MessageType::from_name(&qos.message_type)
+            .ok_or_else(|| anyhow::anyhow!("unknown message type {}", qos.message_type))?;
+        match recorded.get(rec_topic) {
+            None => anyhow::bail!(
+                "replay: topic `{rec_topic}` is not in {} (recorded: {})",
+                p.path,
+                recorded.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+            Some(schema) if *schema != kind.schema_name() => anyhow::bail!(
+                "replay: recorded topic `{rec_topic}` has schema {schema} but graph topic `{}` is {kind}",
+                qos.topic
+            ),
+            Some(_) => {}
+        }
+        outs.insert(rec_topic.clone(), (kind, kit.dyn_output(qos)?));
+    }
+    {
+        let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> =
+            outs.values_mut().map(|(_, o)| o.as_mut() as &mut dyn sonoflow_node_kit::Handshake).collect();
+        kit.handshake(&mut hs)?;
+    }
+    let topics: Vec<String> = outs.keys().cloned().collect();
+    // First log time, for the start offset and pacing.
+    let first = reader
+        .messages(&ReadOptions { topics: Some(topics.clone()), start_time: None, end_time: None })?
+        .next()
+        .transpose()?
+        .map(|m| m.log_time)
+        .unwrap_or(0);
+    let start_time = first + (p.start_offset_s * 1e9) as u64;
+    let total =
+        reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
+    let mut sent = 0u64;
+    let mut last_t = 0.0;
+    let mut lap = 0u32;
+    'outer: loop {
+        let t_start = Instant::now();
+        let mut first_of_lap = true;
+        for m in reader.messages(&ReadOptions {
+            topics: Some(topics.clone()),
+            start_time: Some(start_time),
+            end_time: None,
+        })? {
+            let m = m?;
+            if kit.check_termination().is_err() {
+                break 'outer;
+            }
+            let Some((kind, out)) = outs.get_mut(&m.topic) else { continue };
+            if p.rate > 0.0 {
+                let due = Duration::from_secs_f64((m.log_time.saturating_sub(start_time)) as f64 / 1e9 / p.rate);
+                let el = t_start.elapsed();
+                if due > el {
+                    std::thread::sleep(due - el);
+                }
+            }
+            let t0 = thread_cpu_ns();
+            let (header, payload) = cdr::split(*kind, &m.data)?;
+            let c: sonoflow_messages::MsgHeaderV1 =
+                bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<sonoflow_messages::MsgHeaderV1>()]);
+            let mut flags = FLAG_REPLAYED;
+            if first_of_lap && lap > 0 {
+                flags |= FLAG_RESET;
+            }
+            first_of_lap = false;
+            out.publish_bytes(header, payload, flags)?;
+            last_t = c.t_valid;
+            sent += 1;
+            kit.stats.messages_out += 1;
+            kit.stats.bytes_out += payload.len() as u64;
+            kit.record(c.frame_id, c.t_valid, thread_cpu_ns() - t0)?;
+            if total > 0 && sent.is_multiple_of((total / 20).max(1)) {
+                kit.progress(sent, total * p.loops.max(1) as u64);
+            }
+        }
+        lap += 1;
+        if p.loops != 0 && lap >= p.loops {
+            break;
+        }
+    }
+    for (_, o) in outs.values_mut() {
+        o.eos(last_t)?;
+    }
+    println!("replay: {sent} messages from {}", p.path);
+    kit.finish()?;
+    Ok(())
+}

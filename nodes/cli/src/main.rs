@@ -1,0 +1,184 @@
+use clap::{Parser, Subcommand};
+use sonoflow_launcher::launch::{self, Overrides};
+use sonoflow_node_kit::KindSpec;
+use std::path::PathBuf;
+
+/// sonoflow — ultrasound flow imaging simulation as a graph of processes.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Check a launch file and run its graph.
+    Run {
+        /// Launch file (TOML), e.g. launch/quickstart.toml.
+        file: PathBuf,
+        /// Override a parameter: NODE.PARAM[.SUB]=VALUE (TOML value; repeatable).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        set: Vec<String>,
+        /// Select a node variant: NODE=VARIANT (repeatable).
+        #[arg(long = "swap", value_name = "NODE=VARIANT")]
+        swap: Vec<String>,
+        /// Output folder (default runs/<graph>-<date-time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Service prefix of this run (default: unique per run).
+        #[arg(long)]
+        run_id: Option<String>,
+        /// Only print errors, the recording and the report path.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Check a launch file without starting anything.
+    Check {
+        file: PathBuf,
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        set: Vec<String>,
+        #[arg(long = "swap", value_name = "NODE=VARIANT")]
+        swap: Vec<String>,
+    },
+    /// List the built-in node kinds and their ports.
+    Kinds,
+    /// Run one node process (started by `sonoflow run`, configured by SONOFLOW_NODE_CONFIG).
+    #[command(hide = true)]
+    Node { kind: String },
+    /// Summarise an MCAP recording (topics, counts, completeness, counters).
+    Inspect { file: PathBuf },
+    /// Rewrite a truncated recording (recorder killed) into a complete MCAP file.
+    Recover { input: PathBuf, output: PathBuf },
+    /// Remove shared-memory resources left by killed processes.
+    Clean,
+    /// SIMUS batch tool: scatterers + MUST parameters → RF (.npy) and a JSON sidecar.
+    Simus(sonoflow_tools::simus::SimusArgs),
+    /// Run a scene over a grid of settings; error (from its evaluator) against run time, Pareto front.
+    Sweep(sonoflow_tools::sweep::SweepArgs),
+    /// Smoothn batch tool: robust unsupervised smoothing of a (components, ny, nx) or (ny, nx) .npy field.
+    Smoothn(sonoflow_tools::smoothn::SmoothnArgs),
+    /// RF → I/Q batch tool: (n_samples, n_elements) RF .npy + MUST parameters → complex64 I/Q .npy.
+    Rf2iq(sonoflow_tools::beamform::Rf2IqArgs),
+    /// Delay-and-sum batch tool: (n_samples, n_elements) I/Q .npy → complex64 (nz, nx) image .npy.
+    Das(sonoflow_tools::beamform::DasArgs),
+    /// Colour Doppler batch tool: (nz, nx, n_frames) packet .npy → velocity, power, variance, flags .npy.
+    Doppler(sonoflow_tools::beamform::DopplerArgs),
+    /// Platelet suspension (paper 2): resolved Stokes training data, network training.
+    Platelet {
+        #[command(subcommand)]
+        what: sonoflow_tools::platelet::PlateletCmd,
+    },
+    /// Stability matrix: run the stiff and extreme cases of every stage, print case → outcome.
+    Stability(sonoflow_stability::StabilityArgs),
+    /// Benchmarks (write a Markdown table).
+    Bench {
+        #[command(subcommand)]
+        what: sonoflow_tools::bench::BenchCmd,
+    },
+    /// Receiving process of `sonoflow bench transport`.
+    #[command(hide = true)]
+    BenchPeer(sonoflow_tools::bench::PeerArgs),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let code = match real_main(cli) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("sonoflow: error: {e:#}");
+            1
+        }
+    };
+    std::process::exit(code);
+}
+
+fn real_main(cli: Cli) -> anyhow::Result<i32> {
+    let registry: &'static [KindSpec] = sonoflow_builtin::registry();
+    match cli.cmd {
+        Cmd::Run { file, set, swap, out, run_id, quiet } => {
+            let g = match launch::load(&file, &Overrides { set, swap, lenient_files: false }, registry) {
+                Ok(g) => g,
+                Err(errs) => return Ok(print_errors(&errs)),
+            };
+            for w in &g.warnings {
+                eprintln!("sonoflow: warning: {w}");
+            }
+            let out_dir = out.unwrap_or_else(|| sonoflow_launcher::default_out_dir(&g.graph.name));
+            let run_id = run_id.unwrap_or_else(|| sonoflow_launcher::new_run_id(&g.graph.name));
+            sonoflow_launcher::run_graph(&g, &sonoflow_launcher::RunOptions { out_dir, run_id, quiet })
+        }
+        Cmd::Check { file, set, swap } => {
+            match launch::load(&file, &Overrides { set, swap, lenient_files: true }, registry) {
+                Ok(g) => {
+                    for w in &g.warnings {
+                        println!("warning: {w}");
+                    }
+                    println!(
+                        "{}: ok — {} node(s), {} topic(s), {:.1} MB shared memory",
+                        file.display(),
+                        g.nodes.len(),
+                        g.topics.len(),
+                        g.shm_bytes as f64 / 1e6
+                    );
+                    Ok(0)
+                }
+                Err(errs) => Ok(print_errors(&errs)),
+            }
+        }
+        Cmd::Kinds => {
+            for k in registry {
+                println!("{} — {}", k.name, k.about);
+                for p in k.ports {
+                    println!(
+                        "    {} {} : {}{}",
+                        p.dir.word(),
+                        p.name,
+                        p.message_type,
+                        if p.required { "" } else { " (optional)" }
+                    );
+                }
+            }
+            Ok(0)
+        }
+        Cmd::Node { kind } => {
+            let spec = registry.iter().find(|k| k.name == kind).ok_or_else(|| {
+                let names: Vec<&str> = registry.iter().map(|k| k.name).collect();
+                anyhow::anyhow!("unknown node kind `{kind}` (built-in: {})", names.join(", "))
+            })?;
+            let kit = sonoflow_node_kit::Kit::from_env()?;
+            match (spec.run)(kit) {
+                Ok(()) => Ok(0),
+                Err(e) => {
+                    eprintln!("error: {e:#}");
+                    Ok(1)
+                }
+            }
+        }
+        Cmd::Inspect { file } => sonoflow_tools::recording::inspect(&file),
+        Cmd::Recover { input, output } => sonoflow_tools::recording::recover(&input, &output),
+        Cmd::Clean => {
+            let n = sonoflow_node_kit::cleanup_dead_nodes()?;
+            println!("removed the resources of {n} dead node(s)");
+            Ok(0)
+        }
+        Cmd::Simus(a) => sonoflow_tools::simus::run(&a),
+        Cmd::Smoothn(a) => sonoflow_tools::smoothn::run(&a),
+        Cmd::Sweep(a) => sonoflow_tools::sweep::run(&a, registry),
+        Cmd::Rf2iq(a) => sonoflow_tools::beamform::run_rf2iq(&a),
+        Cmd::Das(a) => sonoflow_tools::beamform::run_das(&a),
+        Cmd::Doppler(a) => sonoflow_tools::beamform::run_doppler(&a),
+        Cmd::Stability(a) => sonoflow_stability::run(&a),
+        Cmd::Platelet { what } => sonoflow_tools::platelet::run(&what),
+        Cmd::Bench { what } => sonoflow_tools::bench::run(what, registry),
+        Cmd::BenchPeer(args) => sonoflow_tools::bench::run_peer(args),
+    }
+}
+
+fn print_errors(errs: &[String]) -> i32 {
+    for e in errs {
+        eprintln!("error: {e}");
+    }
+    eprintln!("{} problem(s) found; nothing was started", errs.len());
+    2
+}

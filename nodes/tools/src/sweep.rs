@@ -1,0 +1,383 @@
+//! `sonoflow sweep`: runs a scene over a grid of parameter settings and reports error against
+//! run time. Every combination of the `--vary node.param=a,b,c` lists is one run (its own output
+//! folder `point-NNN`, its own run id); the error comes from the scene's `evaluator`
+//! (`evaluation.json`), the cost from the run report (compute CPU summed over the stages, and
+//! wall time). Writes `sweep.csv` (all points), `sweep.md` (table, Pareto front marked) and
+//! `sweep.svg` (error against compute time, Pareto front joined).
+
+use sonoflow_launcher::launch::{self, Overrides};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `sonoflow sweep`.
+#[derive(clap::Args, Debug)]
+pub struct SweepArgs {
+    /// Launch file; it must contain an `evaluator` node.
+    pub file: PathBuf,
+    /// `node.param=a,b,c`: values to try (TOML values; commas inside [ ] or { } or quotes do not
+    /// split). Repeat for a grid over several parameters.
+    #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2,…", required = true)]
+    pub vary: Vec<String>,
+    /// Fixed `node.param=value` for every run.
+    #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+    pub set: Vec<String>,
+    /// Fixed `node=variant` for every run.
+    #[arg(long = "swap", value_name = "NODE=VARIANT")]
+    pub swap: Vec<String>,
+    /// Output folder (default `runs/<graph>-sweep-<time>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Evaluated field whose error is plotted: `regularised` (default) or `raw`.
+    #[arg(long, default_value = "regularised")]
+    pub field: String,
+}
+
+/// Splits `a,b,[c,d],"e,f"` at top-level commas.
+pub fn split_values(s: &str) -> Vec<String> {
+    let (mut out, mut cur, mut depth, mut quote) = (Vec::new(), String::new(), 0i32, None::<char>);
+    for ch in s.chars() {
+        match (ch, quote) {
+            ('"' | '\'', None) => quote = Some(ch),
+            (c, Some(q)) if c == q => quote = None,
+            ('[' | '{', None) => depth += 1,
+            (']' | '}', None) => depth -= 1,
+            (',', None) if depth == 0 => {
+                out.push(cur.trim().to_string());
+                cur.clear();
+                continue;
+            }
+            _ => {}
+        }
+        cur.push(ch);
+    }
+    out.push(cur.trim().to_string());
+    out
+}
+
+/// One sweep point's result.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Point {
+    pub index: usize,
+    pub settings: Vec<String>,
+    pub status: String,
+    /// Compute CPU summed over all stages (s).
+    pub compute_s: f64,
+    pub wall_s: f64,
+    /// Mean over packets of the RMS vector error `sqrt(rms_x² + rms_z²)` (fraction of v_max).
+    pub error_rms: f64,
+    /// Mean over packets of |e|75 of x and z (fractions of v_max).
+    pub x_abs_p75: f64,
+    pub z_abs_p75: f64,
+    /// Mean over packets of the gain of vx and vz (slope of the estimate against the truth; NaN
+    /// where a true component is zero).
+    pub x_gain: f64,
+    pub z_gain: f64,
+    pub pareto: bool,
+}
+
+fn read_json(p: &Path) -> anyhow::Result<serde_json::Value> {
+    let text = std::fs::read_to_string(p).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+    Ok(serde_json::from_str(&text)?)
+}
+
+/// Marks the points not dominated in (compute time, error).
+pub fn mark_pareto(points: &mut [Point]) {
+    let ok: Vec<bool> = points.iter().map(|p| p.status == "ok" && p.error_rms.is_finite()).collect();
+    for i in 0..points.len() {
+        points[i].pareto = ok[i]
+            && !(0..points.len()).any(|j| {
+                ok[j]
+                    && j != i
+                    && points[j].compute_s <= points[i].compute_s
+                    && points[j].error_rms <= points[i].error_rms
+                    && (points[j].compute_s < points[i].compute_s || points[j].error_rms < points[i].error_rms)
+            });
+    }
+}
+
+/// Scatter plot of error against compute time (SVG), Pareto front joined.
+pub fn svg(points: &[Point], title: &str) -> String {
+    let ok: Vec<&Point> = points.iter().filter(|p| p.status == "ok" && p.error_rms.is_finite()).collect();
+    let (w, h, m) = (640.0, 420.0, 60.0);
+    let xmax = ok.iter().map(|p| p.compute_s).fold(0.0, f64::max).max(1e-9) * 1.1;
+    let ymax = ok.iter().map(|p| p.error_rms).fold(0.0, f64::max).max(1e-9) * 1.1;
+    let px = |x: f64| m + (w - 2.0 * m) * x / xmax;
+    let py = |y: f64| h - m - (h - 2.0 * m) * y / ymax;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(s, r#"<text x="{}" y="20" text-anchor="middle" font-size="14">{}</text>"#, w / 2.0, xml(title));
+    let _ = writeln!(s, r#"<line x1="{m}" y1="{}" x2="{}" y2="{}" stroke="black"/>"#, h - m, w - m, h - m);
+    let _ = writeln!(s, r#"<line x1="{m}" y1="{m}" x2="{m}" y2="{}" stroke="black"/>"#, h - m);
+    for k in 0..=4 {
+        let (xv, yv) = (xmax * k as f64 / 4.0, ymax * k as f64 / 4.0);
+        let _ = writeln!(s, r#"<text x="{:.1}" y="{}" text-anchor="middle">{xv:.2}</text>"#, px(xv), h - m + 16.0);
+        let _ = writeln!(
+            s,
+            r#"<text x="{}" y="{:.1}" text-anchor="end">{:.1} %</text>"#,
+            m - 6.0,
+            py(yv) + 4.0,
+            100.0 * yv
+        );
+    }
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="{}" text-anchor="middle">compute CPU, all stages (s)</text>"#,
+        w / 2.0,
+        h - 18.0
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="16" y="{}" transform="rotate(-90 16 {})" text-anchor="middle">RMS vector error / v_max</text>"#,
+        h / 2.0,
+        h / 2.0
+    );
+    let mut front: Vec<&&Point> = ok.iter().filter(|p| p.pareto).collect();
+    front.sort_by(|a, b| a.compute_s.total_cmp(&b.compute_s));
+    if front.len() > 1 {
+        let pts: Vec<String> = front.iter().map(|p| format!("{:.1},{:.1}", px(p.compute_s), py(p.error_rms))).collect();
+        let _ =
+            writeln!(s, r#"<polyline points="{}" fill="none" stroke="crimson" stroke-width="1.5"/>"#, pts.join(" "));
+    }
+    for p in &ok {
+        let (fill, r) = if p.pareto { ("crimson", 5.0) } else { ("steelblue", 4.0) };
+        let _ = writeln!(
+            s,
+            r#"<circle cx="{:.1}" cy="{:.1}" r="{r}" fill="{fill}"><title>{}</title></circle>"#,
+            px(p.compute_s),
+            py(p.error_rms),
+            xml(&p.settings.join(", "))
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" font-size="10">{}</text>"#,
+            px(p.compute_s) + 7.0,
+            py(p.error_rms) - 5.0,
+            p.index
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+fn xml(t: &str) -> String {
+    t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// `sonoflow sweep`; `registry`: the node kinds the swept graph may use.
+pub fn run(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
+    if a.field != "regularised" && a.field != "raw" {
+        anyhow::bail!("--field {}: allowed regularised, raw", a.field);
+    }
+    // The grid of settings.
+    let mut axes: Vec<Vec<String>> = Vec::new();
+    for v in &a.vary {
+        let Some((key, values)) = v.split_once('=') else {
+            anyhow::bail!("--vary {v}: expected NODE.PARAM=V1,V2,…");
+        };
+        let vals = split_values(values);
+        if vals.iter().any(String::is_empty) {
+            anyhow::bail!("--vary {v}: empty value in the list");
+        }
+        axes.push(vals.into_iter().map(|x| format!("{key}={x}")).collect());
+    }
+    let mut combos: Vec<Vec<String>> = vec![Vec::new()];
+    for axis in &axes {
+        combos = combos.iter().flat_map(|c| axis.iter().map(move |x| [c.clone(), vec![x.clone()]].concat())).collect();
+    }
+    if combos.len() > 1000 {
+        anyhow::bail!("--vary: {} combinations; at most 1000", combos.len());
+    }
+    // Check every combination before running any.
+    let mut graphs = Vec::new();
+    let mut errors = Vec::new();
+    for c in &combos {
+        let ov = Overrides { set: [a.set.clone(), c.clone()].concat(), swap: a.swap.clone(), lenient_files: false };
+        match launch::load(&a.file, &ov, registry) {
+            Ok(g) => graphs.push(g),
+            Err(e) => errors.extend(e.into_iter().map(|e| format!("[{}] {e}", c.join(", ")))),
+        }
+    }
+    if !errors.is_empty() {
+        for e in &errors {
+            eprintln!("error: {e}");
+        }
+        eprintln!("{} problem(s) found; nothing was run", errors.len());
+        return Ok(2);
+    }
+    let name = graphs.first().map(|g| g.graph.name.clone()).unwrap_or_default();
+    if !graphs
+        .iter()
+        .all(|g| g.nodes.iter().any(|n| matches!(&n.program, launch::Program::Builtin(k) if k == "evaluator")))
+    {
+        anyhow::bail!("{}: a sweep needs an `evaluator` node in the graph (it measures the error)", a.file.display());
+    }
+    let out = a.out.clone().unwrap_or_else(|| sonoflow_launcher::supervise::default_out_dir(&format!("{name}-sweep")));
+    std::fs::create_dir_all(&out).map_err(|e| anyhow::anyhow!("creating {}: {e}", out.display()))?;
+    let mut points = Vec::new();
+    let total = graphs.len();
+    for (k, (g, c)) in graphs.iter().zip(&combos).enumerate() {
+        let dir = out.join(format!("point-{k:03}"));
+        let opts = sonoflow_launcher::supervise::RunOptions {
+            out_dir: dir.clone(),
+            run_id: sonoflow_launcher::supervise::new_run_id(&name),
+            quiet: true,
+        };
+        eprintln!("sweep: point {}/{total}: {}", k + 1, c.join(", "));
+        let code = sonoflow_launcher::run_graph(g, &opts)?;
+        let mut p = Point {
+            index: k,
+            settings: c.clone(),
+            status: if code == 0 { "ok".into() } else { format!("failed (exit {code})") },
+            compute_s: f64::NAN,
+            wall_s: f64::NAN,
+            error_rms: f64::NAN,
+            x_abs_p75: f64::NAN,
+            z_abs_p75: f64::NAN,
+            x_gain: f64::NAN,
+            z_gain: f64::NAN,
+            pareto: false,
+        };
+        if let Ok(r) = read_json(&dir.join("report.json")) {
+            p.wall_s = r["wall_s"].as_f64().unwrap_or(f64::NAN);
+            p.compute_s = r["nodes"]
+                .as_array()
+                .map(|ns| ns.iter().filter_map(|n| n["stats"]["compute_ns_total"].as_f64()).sum::<f64>() / 1e9)
+                .unwrap_or(f64::NAN);
+        }
+        match read_json(&dir.join("evaluation.json")) {
+            Ok(e) => {
+                let fields: Vec<&serde_json::Value> = e["packets"]
+                    .as_array()
+                    .map(|ps| ps.iter().filter_map(|p| p["fields"].get(&a.field)).collect())
+                    .unwrap_or_default();
+                if !fields.is_empty() {
+                    let mean = |f: &dyn Fn(&serde_json::Value) -> f64| {
+                        fields.iter().map(|v| f(v)).sum::<f64>() / fields.len() as f64
+                    };
+                    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+                    p.error_rms = mean(&|v| num(&v["x"]["rms"]).hypot(num(&v["z"]["rms"])));
+                    p.x_abs_p75 = mean(&|v| num(&v["x"]["abs_p75"]));
+                    p.z_abs_p75 = mean(&|v| num(&v["z"]["abs_p75"]));
+                    p.x_gain = mean(&|v| num(&v["gain_x"]));
+                    p.z_gain = mean(&|v| num(&v["gain_z"]));
+                } else if p.status == "ok" {
+                    p.status = format!("no `{}` field evaluated", a.field);
+                }
+            }
+            Err(e) if p.status == "ok" => p.status = format!("no evaluation: {e}"),
+            Err(_) => {}
+        }
+        eprintln!(
+            "sweep: point {}/{total}: {} — error {:.2} % of v_max, compute {:.2} s, wall {:.2} s",
+            k + 1,
+            p.status,
+            100.0 * p.error_rms,
+            p.compute_s,
+            p.wall_s
+        );
+        points.push(p);
+    }
+    mark_pareto(&mut points);
+    let mut csv =
+        String::from("index,settings,status,compute_s,wall_s,error_rms,x_abs_p75,z_abs_p75,x_gain,z_gain,pareto\n");
+    for p in &points {
+        let _ = writeln!(
+            csv,
+            "{},\"{}\",\"{}\",{},{},{},{},{},{},{},{}",
+            p.index,
+            p.settings.join("; ").replace('"', "\"\""),
+            p.status.replace('"', "\"\""),
+            p.compute_s,
+            p.wall_s,
+            p.error_rms,
+            p.x_abs_p75,
+            p.z_abs_p75,
+            p.x_gain,
+            p.z_gain,
+            p.pareto
+        );
+    }
+    sonoflow_fileio::write_atomic(&out.join("sweep.csv"), csv.as_bytes())?;
+    let mut md = format!(
+        "# Sweep of `{}` ({} points, field `{}`)\n\nError = RMS vector error / v_max, mean over packets; ★ = Pareto front (no other point is both faster and more accurate).\n\n| # | settings | status | compute CPU (s) | wall (s) | error | x \\|e\\|₇₅ | z \\|e\\|₇₅ | |\n|---:|---|---|---:|---:|---:|---:|---:|---|\n",
+        name,
+        points.len(),
+        a.field
+    );
+    for p in &points {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.2} | {:.2} | {:.2} % | {:.1} % | {:.1} % | {} |",
+            p.index,
+            p.settings.join(", "),
+            p.status,
+            p.compute_s,
+            p.wall_s,
+            100.0 * p.error_rms,
+            100.0 * p.x_abs_p75,
+            100.0 * p.z_abs_p75,
+            if p.pareto { "★" } else { "" }
+        );
+    }
+    let _ = writeln!(md, "\n![error against run time](sweep.svg)");
+    sonoflow_fileio::write_atomic(&out.join("sweep.md"), md.as_bytes())?;
+    sonoflow_fileio::write_atomic(
+        &out.join("sweep.svg"),
+        svg(&points, &format!("{name}: error against run time")).as_bytes(),
+    )?;
+    println!("sweep: {} point(s) → {}", points.len(), out.join("sweep.md").display());
+    Ok(if points.iter().all(|p| p.status == "ok") { 0 } else { 1 })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_split_at_top_level_commas_only() {
+        assert_eq!(split_values("1, 2.5,x"), ["1", "2.5", "x"]);
+        assert_eq!(split_values("[1,1],[3,3]"), ["[1,1]", "[3,3]"]);
+        assert_eq!(split_values(r#""a,b",{ x = 1, y = 2 }"#), [r#""a,b""#, "{ x = 1, y = 2 }"]);
+    }
+
+    fn pt(i: usize, t: f64, e: f64) -> Point {
+        Point {
+            index: i,
+            settings: vec![],
+            status: "ok".into(),
+            compute_s: t,
+            wall_s: t,
+            error_rms: e,
+            x_abs_p75: e,
+            z_abs_p75: e,
+            x_gain: 1.0,
+            z_gain: 1.0,
+            pareto: false,
+        }
+    }
+
+    #[test]
+    fn pareto_front_keeps_the_non_dominated_points() {
+        // (time, error): 0 fast+bad, 1 dominated by 0, 2 slow+good, 3 middle, 4 dominated by 3, 5 failed.
+        let mut p = vec![
+            pt(0, 1.0, 0.3),
+            pt(1, 2.0, 0.35),
+            pt(2, 5.0, 0.1),
+            pt(3, 2.0, 0.2),
+            pt(4, 3.0, 0.2),
+            pt(5, 0.5, 0.01),
+        ];
+        p[5].status = "failed (exit 1)".into();
+        mark_pareto(&mut p);
+        let front: Vec<usize> = p.iter().filter(|q| q.pareto).map(|q| q.index).collect();
+        assert_eq!(front, [0, 2, 3]);
+        let s = svg(&p, "t");
+        assert_eq!(s.matches("<circle").count(), 5, "failed points are not plotted");
+        assert_eq!(s.matches("fill=\"crimson\"").count(), 3);
+    }
+}
