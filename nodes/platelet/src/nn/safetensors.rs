@@ -410,6 +410,54 @@ mod tests {
         out
     }
 
+    /// FNV-1a (64 bit) over every tensor (name order: name, dtype, shape, the f64 bits of each
+    /// value) and every metadata entry of a file.
+    fn fingerprint((tensors, metadata): &TensorFile) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        let mut eat = |bytes: &[u8]| {
+            for &b in bytes {
+                h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        for (name, t) in tensors {
+            eat(name.as_bytes());
+            eat(format!("{:?}", t.dtype).as_bytes());
+            for &d in &t.shape {
+                eat(&(d as u64).to_le_bytes());
+            }
+            for v in &t.data {
+                eat(&v.to_bits().to_le_bytes());
+            }
+        }
+        for (k, v) in metadata {
+            eat(k.as_bytes());
+            eat(v.as_bytes());
+        }
+        h
+    }
+
+    #[test]
+    fn shipped_weights_load_to_the_values_the_hand_written_reader_gave() {
+        // fingerprints, value counts and first weights that the hand-written reader (before the
+        // `safetensors` crate, commit 05011b4) produced for the three shipped files
+        let want = [
+            ("n.safetensors", 0x21d6_a58c_4c77_f157u64, 1871usize, 0.18808584404447287f64),
+            ("n_r.safetensors", 0xcea9_9512_46a1_6e25, 993, 0.1016892501570603),
+            ("n_s.safetensors", 0x75c4_b32c_4c81_4b60, 993, 0.10465243938423811),
+        ];
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights");
+        for (file, hash, count, first) in want {
+            let path = dir.join(file);
+            let bytes = std::fs::read(&path).expect("shipped weights");
+            let parsed = read_bytes(&bytes, file).expect("shipped weights are valid");
+            let n: usize = parsed.0.values().map(|t| t.data.len()).sum();
+            let w0 = parsed.0["layers.0.weight"].data[0];
+            assert!(parsed.0.values().all(|t| t.dtype == Dtype::F64));
+            assert_eq!((fingerprint(&parsed), n, w0.to_bits()), (hash, count, first.to_bits()), "{file}");
+            Mlp::load(&path).expect("shipped weights load as networks");
+        }
+    }
+
     #[test]
     fn round_trip_through_a_file_is_exact() {
         let dir = tempfile::tempdir().expect("temp dir");
