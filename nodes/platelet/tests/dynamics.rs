@@ -3,6 +3,7 @@
 //! a sphere, the stiff explicit/exponential comparison, advection along the channel streamlines,
 //! eq 12 on linear fields, collisions (momentum, lattice = all pairs), walls and bad inputs.
 
+use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sonoflow_platelet::dynamics::collide::{self, all_pairs, CellGrid, CollisionState};
@@ -590,22 +591,12 @@ fn coupling_shifts_the_relaxed_velocity_as_the_resistance_matrix_predicts() {
         let (tr, rot) = (p.trans[0], p.rot[0]);
         let (sn, cs) = (s.phi + p.psi[0]).sin_cos();
         let c = [tr.c_p * cs, tr.c_p * sn];
-        let r = [[tr.c_d, -tr.c_l, c[0]], [tr.c_l, tr.c_d, c[1]], [c[0], c[1], rot.c_r]];
+        let r = Matrix3::new(tr.c_d, -tr.c_l, c[0], tr.c_l, tr.c_d, c[1], c[0], c[1], rot.c_r);
         let rhs = -rot.c_s * f.body_strain_xy(s.phi);
-        // solve R w = (0, 0, rhs) by Cramer's rule
-        let det3 = |m: [[f64; 3]; 3]| {
-            m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-        };
-        let col = |k: usize| {
-            let mut m = r;
-            for (row, b) in m.iter_mut().zip([0.0, 0.0, rhs]) {
-                row[k] = b;
-            }
-            det3(m) / det3(r)
-        };
-        let want = if coupling { [col(0), col(1)] } else { [0.0, 0.0] };
-        let scale = (col(0).hypot(col(1))).max(1e-30);
+        // solve R w = (0, 0, rhs)
+        let w = r.lu().solve(&Vector3::new(0.0, 0.0, rhs)).expect("R is not singular");
+        let want = if coupling { [w.x, w.y] } else { [0.0, 0.0] };
+        let scale = (w.x.hypot(w.y)).max(1e-30);
         println!(
             "coupling {coupling}: dv = ({:.4e}, {:.4e}), predicted ({:.4e}, {:.4e})",
             dv[0], dv[1], want[0], want[1]

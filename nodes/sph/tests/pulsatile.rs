@@ -1,5 +1,6 @@
 //! Womersley pulsatile channel flow and the Taylor–Green vortex (sph-validation.md §b, §d).
 
+use nalgebra::{Matrix3, Vector3};
 use sonoflow_sph::setup::ChannelConfig;
 use sonoflow_sph::womersley::forced_velocity;
 use sonoflow_sph::{KernelKind, ParticleKind, Period, PulsatileForce, Real, Solver, SphParams, WaveformSpec};
@@ -8,38 +9,14 @@ use std::f64::consts::PI;
 /// Least-squares fit of C + A cos(ωt) + B sin(ωt): returns (amplitude, phase lag in degrees
 /// behind cos ωt).
 fn fit(ts: &[Real], us: &[Real], omega: Real) -> (Real, Real) {
-    // normal equations of the 3-parameter model
-    let mut m = [[0.0; 3]; 3];
-    let mut r = [0.0; 3];
+    // normal equations of the 3-parameter model (symmetric positive definite: Cholesky)
+    let (mut m, mut r) = (Matrix3::zeros(), Vector3::zeros());
     for (&t, &u) in ts.iter().zip(us) {
-        let f = [1.0, (omega * t).cos(), (omega * t).sin()];
-        for (i, row) in m.iter_mut().enumerate() {
-            r[i] += f[i] * u;
-            for (j, v) in row.iter_mut().enumerate() {
-                *v += f[i] * f[j];
-            }
-        }
+        let f = Vector3::new(1.0, (omega * t).cos(), (omega * t).sin());
+        m += f * f.transpose();
+        r += f * u;
     }
-    // Gaussian elimination
-    for i in 0..3 {
-        let p = m[i][i];
-        for j in i + 1..3 {
-            let q = m[j][i] / p;
-            let mi = m[i];
-            for (v, w) in m[j].iter_mut().zip(mi) {
-                *v -= q * w;
-            }
-            r[j] -= q * r[i];
-        }
-    }
-    let mut x = [0.0; 3];
-    for i in (0..3).rev() {
-        let mut s = r[i];
-        for j in i + 1..3 {
-            s -= m[i][j] * x[j];
-        }
-        x[i] = s / m[i][i];
-    }
+    let x = m.cholesky().expect("samples spread over the period").solve(&r);
     ((x[1] * x[1] + x[2] * x[2]).sqrt(), x[2].atan2(x[1]).to_degrees())
 }
 

@@ -67,6 +67,7 @@
 //! per node, serial and deterministic; the workspaces are kept between snapshots.
 
 use super::flow::{FlowError, LatticeField};
+use nalgebra::{Matrix3, Matrix3x2};
 
 /// The SPH kernel of the interpolation (same functions and normalisation as `sonoflow-sph`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -375,23 +376,23 @@ fn linear_fit(s: &Sums) -> Option<[f64; 2]> {
     let w = s[0];
     // M / ΣW = [[1, mx, my], [mx, mxx, mxy], [my, mxy, myy]], offsets in units of h
     let (mx, my, mxx, mxy, myy) = (s[1] / w, s[2] / w, s[3] / w, s[4] / w, s[5] / w);
-    // cofactors of the first row (M symmetric: the first row of M⁻¹ is the first column of cof / det)
-    let c00 = mxx * myy - mxy * mxy;
-    let c01 = -(mx * myy - mxy * my);
-    let c02 = mx * mxy - mxx * my;
-    let det = c00 + mx * c01 + my * c02;
+    let m = Matrix3::new(1.0, mx, my, mx, mxx, mxy, my, mxy, myy);
+    let det = m.determinant();
     if det.is_nan() || det < MIN_MOMENT_DET {
         return None;
     }
-    let a = |b0: f64, b1: f64, b2: f64| (c00 * b0 + c01 * b1 + c02 * b2) / (det * w);
-    Some([a(s[6], s[7], s[8]), a(s[9], s[10], s[11])])
+    // the constant term: the first row of M⁻¹ times the right-hand sides Σ W v (1, Δx, Δy) / ΣW
+    let rhs = Matrix3x2::new(s[6], s[9], s[7], s[10], s[8], s[11]);
+    let a = m.try_inverse()?.row(0) * rhs / w;
+    Some([a[0], a[1]])
 }
 
 #[cfg(test)]
 mod tests {
     // (index loops read like the matrix algebra of the naive reference)
-    #![allow(clippy::unwrap_used, clippy::needless_range_loop)]
+    #![allow(clippy::unwrap_used)]
     use super::*;
+    use nalgebra::Vector3;
     use rand::{Rng, SeedableRng};
 
     const KINDS: [SphKernel; 2] = [SphKernel::QuarticSpline, SphKernel::WendlandC2];
@@ -458,27 +459,6 @@ mod tests {
         InterpParams { kernel, h, min_fraction: 0.4, order }
     }
 
-    /// Gaussian elimination with partial pivoting (the naive reference for the 3 × 3 fits).
-    fn solve3(mut m: [[f64; 3]; 3], mut b: [f64; 3]) -> [f64; 3] {
-        for c in 0..3 {
-            let p = (c..3).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs())).unwrap();
-            m.swap(c, p);
-            b.swap(c, p);
-            for r in c + 1..3 {
-                let f = m[r][c] / m[c][c];
-                for k in c..3 {
-                    m[r][k] -= f * m[c][k];
-                }
-                b[r] -= f * b[c];
-            }
-        }
-        let mut x = [0.0; 3];
-        for c in (0..3).rev() {
-            x[c] = (b[c] - (c + 1..3).map(|k| m[c][k] * x[k]).sum::<f64>()) / m[c][c];
-        }
-        x
-    }
-
     #[test]
     fn scatter_equals_a_naive_fit_over_all_particles_and_nodes() {
         let (pos, vel) =
@@ -496,17 +476,15 @@ mod tests {
                     for i in 0..60 {
                         let x = f.node_position(i, j);
                         // weighted sums in SI units over every particle
-                        let (mut m, mut bu, mut bv, mut sw) = ([[0.0; 3]; 3], [0.0; 3], [0.0; 3], 0.0);
+                        let (mut m, mut bu, mut bv, mut sw) =
+                            (Matrix3::zeros(), Vector3::zeros(), Vector3::zeros(), 0.0);
                         for (q, u) in pos.iter().zip(&vel) {
                             let w = kernel.w((x[0] - q[0]).hypot(x[1] - q[1]), p.h);
-                            let e = [1.0, q[0] - x[0], q[1] - x[1]];
-                            for r in 0..3 {
-                                for c in 0..3 {
-                                    m[r][c] += w * e[r] * e[c];
-                                }
-                                bu[r] += w * e[r] * u[0];
-                                bv[r] += w * e[r] * u[1];
-                            }
+                            let e = Vector3::new(1.0, q[0] - x[0], q[1] - x[1]);
+                            let we = e * w;
+                            m += we * e.transpose();
+                            bu += we * u[0];
+                            bv += we * u[1];
                             sw += w;
                         }
                         let phi = rep.volume * sw;
@@ -514,14 +492,15 @@ mod tests {
                         assert_eq!(f.node_valid(i, j), sw > 0.0 && phi >= p.min_fraction, "mask at ({i}, {j})");
                         let got = f.node_velocity(i, j).unwrap();
                         // the fit's conditioning: det(M) = (ΣW)³ h⁴ det(M normalised)
-                        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-                            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-                            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-                        let singular = det / (sw.powi(3) * p.h.powi(4)) < MIN_MOMENT_DET;
+                        let singular = m.determinant() / (sw.powi(3) * p.h.powi(4)) < MIN_MOMENT_DET;
                         fallback += (f.node_valid(i, j) && singular && order == InterpOrder::Linear) as usize;
                         let want = match (f.node_valid(i, j), order) {
                             (false, _) => [0.0, 0.0],
-                            (true, InterpOrder::Linear) if !singular => [solve3(m, bu)[0], solve3(m, bv)[0]],
+                            (true, InterpOrder::Linear) if !singular => {
+                                // LU with partial pivoting: independent of the fit's inverse
+                                let lu = m.lu();
+                                [lu.solve(&bu).unwrap()[0], lu.solve(&bv).unwrap()[0]]
+                            }
                             (true, _) => [bu[0] / sw, bv[0] / sw],
                         };
                         worst = worst.max((got[0] - want[0]).abs().max((got[1] - want[1]).abs()));

@@ -10,7 +10,8 @@
 //!   ([`mlp::Mirror`]: the platelet mirrored about its x axis), full-batch L-BFGS refinement.
 //! - [`data`]: data sets, the seeded 80/20 split and the error metrics of the paper's Table 1
 //!   ([`TrainingReport`]).
-//! - [`safetensors`]: weights on disk in the safetensors format, validated on load.
+//! - [`safetensors`]: weights on disk in the safetensors format (read and written with the
+//!   `safetensors` crate), validated on load.
 //! - [`model`]: the eq 18 scaling, the unit conversion to SI and [`NetworkModel`], a
 //!   [`crate::CoefficientModel`] made of the three networks N, N_r and N_s.
 //!

@@ -67,6 +67,7 @@ use crate::shape::{Shape, ShapeError};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use mesh::Surface;
+use nalgebra::{Matrix2, Vector2};
 use quadrature::{far_rule, panel_integral, tensor_points, FarRule, Rules, Sym};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -205,13 +206,11 @@ impl ShapeResistance {
     /// ([`crate::coefficients`]): c_d = d·K·d, c_l = d^⊥·K·d, c_p = t·d with d = (cos ψ, sin ψ).
     pub fn translational(&self, psi: f64) -> Translational {
         let (s, c) = psi.sin_cos();
-        let k = &self.force_per_flow;
-        let f = [k[0][0] * c + k[0][1] * s, k[1][0] * c + k[1][1] * s];
-        Translational {
-            c_d: f[0] * c + f[1] * s,
-            c_l: -f[0] * s + f[1] * c,
-            c_p: self.torque_per_flow[0] * c + self.torque_per_flow[1] * s,
-        }
+        let d = Vector2::new(c, s);
+        let [[k00, k01], [k10, k11]] = self.force_per_flow;
+        let f = Matrix2::new(k00, k01, k10, k11) * d;
+        // d^⊥ · f = d × f (the z component)
+        Translational { c_d: d.dot(&f), c_l: d.perp(&f), c_p: Vector2::from(self.torque_per_flow).dot(&d) }
     }
 
     /// c_r and c_s ([`crate::coefficients`]).
