@@ -86,7 +86,7 @@ const GOOD: &str = r#"
 [graph]
 name = "g"
 [topics]
-rf = { type = "RfFrameV1", max_elements = 1024 }
+rf = { type = "RfFrameV2", max_elements = 1024 }
 [nodes.source]
 kind = "test-source"
 outputs = { rf = "rf" }
@@ -106,10 +106,10 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
         (
             &GOOD
                 .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
-                .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV1\", max_elements = 10 }\n"),
+                .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV2\", max_elements = 10 }\n"),
             &[],
             &[
-                "carries RfFrameV1 but topic `iq` is IqFrameV1",
+                "carries RfFrameV2 but topic `iq` is IqFrameV2",
                 "topic `iq` is consumed by checker but no node produces it",
             ],
         ),

@@ -61,8 +61,8 @@ fn smoothn_tool_matches_the_library_and_writes_a_sidecar() {
     assert!(stdout.contains("2 component(s)"), "{stdout}");
     let got = npy::read(&out).unwrap();
     assert_eq!(got.shape, vec![2, 30, 40]);
-    let params = sonoflow_smoothn::SmoothnParams { robust: true, ..Default::default() };
-    let (expect, report) = sonoflow_smoothn::smoothn(&noisy, &[30, 40], 2, None, &params).unwrap();
+    let params = sonoflow_regularise::SmoothnParams { robust: true, ..Default::default() };
+    let (expect, report) = sonoflow_regularise::smoothn(&noisy, &[30, 40], 2, None, &params).unwrap();
     assert!(got.data == expect, "tool output differs from the library");
     let side: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(sonoflow_tools::smoothn::sidecar(&out)).unwrap()).unwrap();
@@ -94,8 +94,8 @@ fn smoothn_tool_fixed_s_scalar_field_with_weights() {
     let got = npy::read(&out).unwrap();
     assert_eq!(got.shape, vec![30, 40]);
     let input: Vec<f64> = scalar.iter().map(|&v| v as f32 as f64).collect();
-    let params = sonoflow_smoothn::SmoothnParams { s: Some(3.5), order: 1, ..Default::default() };
-    let (expect, report) = sonoflow_smoothn::smoothn(&input, &[30, 40], 1, Some(&w), &params).unwrap();
+    let params = sonoflow_regularise::SmoothnParams { s: Some(3.5), order: 1, ..Default::default() };
+    let (expect, report) = sonoflow_regularise::smoothn(&input, &[30, 40], 1, Some(&w), &params).unwrap();
     assert!(got.data == expect);
     assert_eq!(report.s, 3.5);
 }
@@ -115,9 +115,9 @@ fn smoothn_tool_divergence_free_matches_the_library() {
     assert!(stdout.contains("divergence-free fit on [30, 40]") && stdout.contains("block CV"), "{stdout}");
     let got = npy::read(&out).unwrap();
     assert_eq!(got.shape, vec![2, 30, 40]);
-    let f = sonoflow_smoothn::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
+    let f = sonoflow_regularise::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
     let (mut vx, mut vz) = (vec![0.0; 1200], vec![0.0; 1200]);
-    let p = sonoflow_smoothn::DivFreeParams::default();
+    let p = sonoflow_regularise::DivFreeParams::default();
     let report = f.fit(&noisy[..1200], &noisy[1200..], None, &p, &mut vx, &mut vz).unwrap();
     assert!(got.data[..1200] == vx[..] && got.data[1200..] == vz[..], "tool output differs from the library");
     assert!(report.max_divergence < 1e-12);
@@ -151,16 +151,16 @@ fn smoothn_tool_no_slip_matches_the_library() {
     );
     assert_eq!(code, 0, "{stderr}");
     let got = npy::read(&out).unwrap();
-    let ns = sonoflow_smoothn::NoSlipParams::default();
+    let ns = sonoflow_regularise::NoSlipParams::default();
     let blood: Vec<bool> = (0..1200).map(|i| noisy[i].is_finite() && noisy[1200 + i].is_finite()).collect();
-    let wall = sonoflow_smoothn::wall_from_power(&power, &blood, [30, 40], [2e-4, 2e-4], &ns).unwrap();
+    let wall = sonoflow_regularise::wall_from_power(&power, &blood, [30, 40], [2e-4, 2e-4], &ns).unwrap();
     let n_wall = wall.iter().filter(|w| **w).count();
     assert!(n_wall > 300 && n_wall < 1200 - 400, "{n_wall} wall pixels");
     let w: Vec<f64> = wall.iter().map(|o| if *o { 0.0 } else { 1.0 }).collect();
     let prior: Vec<f64> = wall.iter().map(|o| if *o { ns.weight } else { 0.0 }).collect();
-    let f = sonoflow_smoothn::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
+    let f = sonoflow_regularise::DivFree::new([30, 40], [2e-4, 2e-4], 3).unwrap();
     let (mut vx, mut vz) = (vec![0.0; 1200], vec![0.0; 1200]);
-    let p = sonoflow_smoothn::DivFreeParams::default();
+    let p = sonoflow_regularise::DivFreeParams::default();
     f.fit_with_wall(&noisy[..1200], &noisy[1200..], Some(&w), Some(&prior), &p, None, &mut vx, &mut vz).unwrap();
     assert!(got.data[..1200] == vx[..] && got.data[1200..] == vz[..], "tool output differs from the library");
     let side: serde_json::Value =

@@ -7,9 +7,9 @@
 mod common;
 use common::bin;
 use sonoflow_beamform::{
-    flags, to_element_major, to_sample_major, DasParams, DasPlan, DopplerEstimator, DopplerParams, Estimator, Grid,
-    Interpolation, Packet, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
+    to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
 };
+use sonoflow_doppler::{flags, DopplerEstimator, DopplerParams, Estimator, Packet};
 use sonoflow_fileio::npy;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -273,7 +273,7 @@ fn doppler_tool_recovers_a_known_phase_rotation_and_matches_the_library() {
     std::fs::write(&param, "fc = 5e6\nc = 1540\nPRF = 4000\npitch = 3e-4\nNelements = 128\n").unwrap();
     let (fc, c, prf) = (5e6, 1540.0, 4000.0);
     let out = dir.path().join("v.npy");
-    let (code, stdout, stderr) = cli("doppler", &["--packet", s(&pk), "--param", s(&param), "--out", s(&out)]);
+    let (code, stdout, stderr) = cli("iq2doppler", &["--packet", s(&pk), "--param", s(&param), "--out", s(&out)]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("1 no-estimate, 1 aliasing"), "{stdout}");
     let v = npy::read(&out).unwrap();

@@ -21,8 +21,8 @@ if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c "import pymust" 2>/dev
 fi
 OUT=$(mktemp -d /tmp/beamform-sbs.XXXXXX)
 echo "== load: $(uptime)"
-echo "== Rust (cargo run --release -p sonoflow-beamform --example beamform_bench)"
-(cd "$ROOT" && cargo run --quiet --release -p sonoflow-beamform --example beamform_bench -- --reps "$REPS" --write "$OUT")
+echo "== Rust (cargo run --release -p sonoflow-doppler --example beamform_bench)"
+(cd "$ROOT" && cargo run --quiet --release -p sonoflow-doppler --example beamform_bench -- --reps "$REPS" --write "$OUT")
 echo "== PyMUST 0.1.9 (same data)"
 export OPENBLAS_NUM_THREADS=${PYMUST_THREADS:-1} OMP_NUM_THREADS=${PYMUST_THREADS:-1} MKL_NUM_THREADS=${PYMUST_THREADS:-1}
 "$VENV/bin/python" - "$OUT" "$REPS" <<'PY'

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Reference outputs of PyMUST 0.1.9 `smoothn` for the Rust crate `sonoflow-smoothn`.
+"""Reference outputs of PyMUST 0.1.9 `smoothn` for the Rust crate `sonoflow-regularise`.
 
 Writes small cases (inputs, weights, outputs as float64 .npy, C order, shape (components, ny, nx)
 or (components, *grid)) and `cases.json` (parameters, S and exitflag returned by PyMUST) to
-nodes/smoothn/tests/data/. The Rust test `tests/pymust_reference.rs` reads them.
+nodes/regularise/tests/data/. The Rust test `tests/pymust_reference.rs` reads them.
 
 Run with a Python that has PyMUST 0.1.9:
     python3 -m venv /tmp/smoothn-venv && /tmp/smoothn-venv/bin/pip install pymust==0.1.9

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Side-by-side timing: PyMUST 0.1.9 `smoothn` vs the Rust crate `sonoflow-smoothn`, same field, same run.
+"""Side-by-side timing: PyMUST 0.1.9 `smoothn` vs the Rust crate `sonoflow-regularise`, same field, same run.
 
 Robust smoothing with automatic S (GCV) of a 2 × NY × NX vector field (smooth flow + N(0, 0.1²) noise
 + 10 % gross outliers uniform in ±2.5, seeded). The field is written to .npy, PyMUST is timed in this
@@ -74,7 +74,7 @@ def time_pymust(f, repeats):
 
 
 def run_rust(field_path, out_path, repeats, flavour):
-    cmd = ["cargo", "run", "--quiet", "--release", "-p", "sonoflow-smoothn", "--example", "smoothn_bench", "--",
+    cmd = ["cargo", "run", "--quiet", "--release", "-p", "sonoflow-regularise", "--example", "smoothn_bench", "--",
            "--in", str(field_path), "--out", str(out_path), "--repeats", str(repeats), "--flavour", flavour]
     res = subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True, text=True)
     line = [l for l in res.stdout.splitlines() if l.startswith("{")][-1]
@@ -98,7 +98,7 @@ def main():
         tmp = pathlib.Path(tmp)
         np.save(tmp / "field.npy", f)
         # Build first so that compilation is not timed; the example itself times only smoothing.
-        subprocess.run(["cargo", "build", "--quiet", "--release", "-p", "sonoflow-smoothn", "--example", "smoothn_bench"],
+        subprocess.run(["cargo", "build", "--quiet", "--release", "-p", "sonoflow-regularise", "--example", "smoothn_bench"],
                        cwd=ROOT, check=True)
         time_pymust(f, 1)  # warm-up (imports, SciPy plans)
         with Phase() as ph_py:

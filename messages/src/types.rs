@@ -17,12 +17,12 @@ pub trait Transportable {}
 impl<T> Transportable for T {}
 use std::fmt::Debug;
 
-/// Every topic kind of the graph. The string form (`"RfFrameV1"`) is what launch files use.
+/// Every topic kind of the graph. The string form (`"RfFrameV2"`) is what launch files use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum MessageType {
     ParticleSnapshotV1,
-    RfFrameV1,
-    IqFrameV1,
+    RfFrameV2,
+    IqFrameV2,
     DopplerMapV1,
     VectorFieldV1,
     StageStatsV1,
@@ -33,8 +33,8 @@ impl MessageType {
     /// All message types.
     pub const ALL: [MessageType; 7] = [
         MessageType::ParticleSnapshotV1,
-        MessageType::RfFrameV1,
-        MessageType::IqFrameV1,
+        MessageType::RfFrameV2,
+        MessageType::IqFrameV2,
         MessageType::DopplerMapV1,
         MessageType::VectorFieldV1,
         MessageType::StageStatsV1,
@@ -45,8 +45,8 @@ impl MessageType {
     pub fn name(self) -> &'static str {
         match self {
             MessageType::ParticleSnapshotV1 => "ParticleSnapshotV1",
-            MessageType::RfFrameV1 => "RfFrameV1",
-            MessageType::IqFrameV1 => "IqFrameV1",
+            MessageType::RfFrameV2 => "RfFrameV2",
+            MessageType::IqFrameV2 => "IqFrameV2",
             MessageType::DopplerMapV1 => "DopplerMapV1",
             MessageType::VectorFieldV1 => "VectorFieldV1",
             MessageType::StageStatsV1 => "StageStatsV1",
@@ -57,6 +57,30 @@ impl MessageType {
     /// Parses a launch-file name.
     pub fn from_name(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+
+    /// Parses a name, with an error that names the retired wire versions (launch files and
+    /// recordings of an older sonoflow) and what replaced them.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        if let Some(k) = Self::from_name(s) {
+            return Ok(k);
+        }
+        match RETIRED.iter().find(|r| r.0 == s) {
+            Some((old, new, why)) => Err(format!(
+                "message type {old} is a retired wire version: this sonoflow reads and writes {new} ({why}); \
+                 re-record with this version, or replay with the sonoflow that wrote it"
+            )),
+            None => Err(format!(
+                "unknown message type `{s}`; known: {}",
+                Self::ALL.iter().map(|k| k.name()).collect::<Vec<_>>().join(", ")
+            )),
+        }
+    }
+
+    /// The message type whose MCAP schema name is `schema` (`sonoflow_msgs/msg/<name>`), or the
+    /// error of [`MessageType::parse`] (retired versions named).
+    pub fn from_schema_name(schema: &str) -> Result<Self, String> {
+        Self::parse(schema.strip_prefix("sonoflow_msgs/msg/").unwrap_or(schema))
     }
 
     /// Size of one payload element in bytes.
@@ -85,6 +109,16 @@ impl std::fmt::Display for MessageType {
         f.write_str(self.name())
     }
 }
+
+/// Wire versions this sonoflow no longer reads: (old name, replacement, what changed).
+pub const RETIRED: &[(&str, &str, &str)] = &[
+    ("RfFrameV1", "RfFrameV2", "the header gained the element width"),
+    (
+        "IqFrameV1",
+        "IqFrameV2",
+        "the header gained the receive aperture: pitch, width, f-number, n_elements, apodisation",
+    ),
+];
 
 /// Ties a [`MessageType`] to its header and payload element types.
 pub trait WireMessage: 'static {
@@ -122,11 +156,11 @@ macro_rules! message_type {
 message_type!(ParticleSnapshot, ParticleSnapshotV1, ParticleSnapshotHeaderV1, ParticleV1, |h| Some(
     h.n_particles as usize
 ));
-message_type!(RfFrame, RfFrameV1, RfFrameHeaderV1, f32, |h| {
+message_type!(RfFrame, RfFrameV2, RfFrameHeaderV2, f32, |h| {
     let per = if h.sample_format == SAMPLE_IQ_F32 { 2 } else { 1 };
     Some(h.n_channels as usize * h.n_samples as usize * per)
 });
-message_type!(IqFrame, IqFrameV1, IqFrameHeaderV1, Complex32, |h| Some(h.grid.nx as usize * h.grid.nz as usize));
+message_type!(IqFrame, IqFrameV2, IqFrameHeaderV2, Complex32, |h| Some(h.grid.nx as usize * h.grid.nz as usize));
 message_type!(DopplerMap, DopplerMapV1, DopplerMapHeaderV1, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
@@ -145,11 +179,11 @@ macro_rules! with_type {
                 type $M = $crate::types::ParticleSnapshot;
                 $body
             }
-            $crate::MessageType::RfFrameV1 => {
+            $crate::MessageType::RfFrameV2 => {
                 type $M = $crate::types::RfFrame;
                 $body
             }
-            $crate::MessageType::IqFrameV1 => {
+            $crate::MessageType::IqFrameV2 => {
                 type $M = $crate::types::IqFrame;
                 $body
             }
@@ -173,3 +207,26 @@ macro_rules! with_type {
     };
 }
 pub use with_type;
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    /// Names of the current types parse; a retired wire version is refused with a message that
+    /// names it and its replacement (what `replay` and the launcher report); others list the
+    /// known names.
+    #[test]
+    fn retired_wire_versions_are_named_in_the_error() {
+        for k in MessageType::ALL {
+            assert_eq!(MessageType::parse(k.name()), Ok(k));
+            assert_eq!(MessageType::from_schema_name(&k.schema_name()), Ok(k));
+        }
+        let e = MessageType::from_schema_name("sonoflow_msgs/msg/IqFrameV1").unwrap_err();
+        assert!(e.contains("IqFrameV1") && e.contains("retired") && e.contains("IqFrameV2"), "{e}");
+        let e = MessageType::parse("RfFrameV1").unwrap_err();
+        assert!(e.contains("RfFrameV2") && e.contains("element width"), "{e}");
+        let e = MessageType::parse("IqFrame").unwrap_err();
+        assert!(e.contains("unknown") && e.contains("DopplerMapV1"), "{e}");
+    }
+}

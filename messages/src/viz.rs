@@ -76,8 +76,8 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
             let h: VectorFieldHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
-        MessageType::IqFrameV1 => {
-            let h: IqFrameHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
+        MessageType::IqFrameV2 => {
+            let h: IqFrameHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
             let iq: Vec<Complex32> = bytemuck::pod_collect_to_vec(payload);
             let (nx, nz) = (h.grid.nx as usize, h.grid.nz as usize);
             if iq.len() != nx * nz || iq.is_empty() {
@@ -102,7 +102,7 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageType::RfFrameV1 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
+        MessageType::RfFrameV2 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
     }
 }
 

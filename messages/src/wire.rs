@@ -6,7 +6,7 @@ use crate::wire_struct;
 #[allow(unused_imports)]
 use iceoryx2::prelude::ZeroCopySend;
 
-/// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV1`].
+/// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV2`].
 pub const MAX_TX_ELEMENTS: usize = 256;
 /// Maximum number of planes in a map ([`DopplerMapHeaderV1`], [`VectorFieldHeaderV1`]).
 pub const MAX_PLANES: usize = 8;
@@ -102,15 +102,15 @@ wire_struct! {
     }
 }
 
-/// `RfFrameHeaderV1::sample_format`: real RF, f32, payload `[channel][sample]`.
+/// `RfFrameHeaderV2::sample_format`: real RF, f32, payload `[channel][sample]`.
 pub const SAMPLE_RF_F32: u32 = 0;
-/// `RfFrameHeaderV1::sample_format`: I/Q interleaved f32 (re, im), payload `[channel][sample][2]`.
+/// `RfFrameHeaderV2::sample_format`: I/Q interleaved f32 (re, im), payload `[channel][sample][2]`.
 pub const SAMPLE_IQ_F32: u32 = 1;
 
 wire_struct! {
     /// Header of one received RF frame (one transmit). Payload: f32, channel-major
     /// (`data[ch·n_samples + k]`), sample k at t = t0 + k/fs.
-    pub struct RfFrameHeaderV1 as "sonoflow_msgs/RfFrameHeaderV1" {
+    pub struct RfFrameHeaderV2 as "sonoflow_msgs/RfFrameHeaderV2" {
         pub common: MsgHeaderV1,
         /// Sampling frequency (Hz).
         pub fs: f64,
@@ -126,6 +126,8 @@ wire_struct! {
         pub tx_angle: f64,
         /// Pulse repetition frequency (Hz).
         pub prf: f64,
+        /// Element width (m, ≤ pitch; 0 = unknown): the element directivity downstream.
+        pub element_width: f64,
         pub n_channels: u32,
         pub n_samples: u32,
         /// Transmit index within the sequence.
@@ -150,9 +152,10 @@ wire_struct! {
 }
 
 wire_struct! {
-    /// Header of a beamformed I/Q image for one receive angle. Payload: `Complex32`, row-major
+    /// Header of a beamformed I/Q image for one receive angle; it carries the receive aperture
+    /// the image was formed with, so a consumer needs no copy of the beamformer's config. Payload: `Complex32`, row-major
     /// on `grid` (`iz·nx + ix`).
-    pub struct IqFrameHeaderV1 as "sonoflow_msgs/IqFrameHeaderV1" {
+    pub struct IqFrameHeaderV2 as "sonoflow_msgs/IqFrameHeaderV2" {
         pub common: MsgHeaderV1,
         pub grid: GridV1,
         pub fc: f64,
@@ -162,12 +165,28 @@ wire_struct! {
         pub rx_angle: f64,
         /// Transmit tilt (rad).
         pub tx_angle: f64,
+        /// Receive aperture: element pitch (m).
+        pub pitch: f64,
+        /// Receive aperture: element width (m; 0 = unknown, elements then weigh equally).
+        pub element_width: f64,
+        /// Receive aperture: f-number of the beamformer (0 = the whole array at every pixel).
+        pub fnumber: f64,
         pub packet: u32,
         pub frame_in_packet: u32,
         pub tx_id: u32,
+        /// Receive aperture: number of elements of the array; 0 = the aperture is unknown
+        /// (consumers then use the nominal plane-wave geometry).
+        pub n_elements: u32,
+        /// Receive aperture: apodisation across it, `APODIZATION_*`.
+        pub apodization: u32,
         pub reserved: u32,
     }
 }
+
+/// `IqFrameHeaderV2::apodization`: equal weights.
+pub const APODIZATION_BOXCAR: u32 = 0;
+/// `IqFrameHeaderV2::apodization`: Hann window across the aperture.
+pub const APODIZATION_HANN: u32 = 1;
 
 /// Plane ids of maps ([`DopplerMapHeaderV1::plane_ids`], [`VectorFieldHeaderV1::plane_ids`]).
 pub mod plane {

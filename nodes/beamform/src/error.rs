@@ -46,12 +46,12 @@ pub enum BeamformError {
 pub type Result<T, E = BeamformError> = std::result::Result<T, E>;
 
 /// Shorthand for [`BeamformError::InvalidParameter`].
-pub(crate) fn invalid(field: &'static str, value: impl std::fmt::Display, allowed: &'static str) -> BeamformError {
+pub fn invalid(field: &'static str, value: impl std::fmt::Display, allowed: &'static str) -> BeamformError {
     BeamformError::InvalidParameter { field, value: value.to_string(), allowed }
 }
 
 /// Checks that `v` is finite and > 0.
-pub(crate) fn positive(field: &'static str, v: f64) -> Result<()> {
+pub fn positive(field: &'static str, v: f64) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
@@ -60,7 +60,7 @@ pub(crate) fn positive(field: &'static str, v: f64) -> Result<()> {
 }
 
 /// Checks a buffer length.
-pub(crate) fn check_len(field: &'static str, got: usize, expected: usize) -> Result<()> {
+pub fn check_len(field: &'static str, got: usize, expected: usize) -> Result<()> {
     if got == expected {
         Ok(())
     } else {

@@ -1,4 +1,4 @@
-//! Beamforming and Doppler estimation for plane-wave ultrasound (Shahriari & Garcia 2018,
+//! Beamforming for plane-wave ultrasound (Shahriari & Garcia 2018,
 //! *Meshfree simulations of ultrasound vector flow imaging using smoothed particle
 //! hydrodynamics*, PMB 63:205011, §2.4, eq. 19–20), following MUST/PyMUST 0.1.9 conventions
 //! (`rf2iq`, `dasmtx`, `iq2doppler`; see `docs/research/pymust-notes.md` §6–8).
@@ -10,31 +10,26 @@
 //!    tilt, focused, diverging, arbitrary delays), f-number receive aperture steered by a receive
 //!    angle, linear interpolation and I/Q phase rotation, as a precomputed sparse operator;
 //!    [`CompoundPlan`] for coherent compounding over transmits.
-//! 3. [`ClutterFilter`] ([`clutter`]): polynomial-regression high-pass over slow time.
-//! 4. [`DopplerEstimator`] ([`doppler`]): lag-L autocorrelation (eq. 19) or Loupas 2-D
-//!    autocorrelator, spatial window, power, variance and per-pixel flags.
-//! 5. [`solve_vector`] ([`vector`]): least-squares (vx, vz) from two or more receive angles.
+//!
+//! Slow-time processing of the beamformed packets (clutter filter, Doppler estimators, vector
+//! Doppler) lives in `sonoflow-doppler`.
 //!
 //! Units are SI; x lateral (0 at the array centre), z depth (> 0 into the medium). Doppler
 //! velocities are positive toward the probe. No IPC: nodes and batch tools wrap this library.
 
 pub mod butterworth;
-pub mod clutter;
 pub mod das;
-pub mod doppler;
 pub mod error;
 pub mod grid;
 pub mod rf2iq;
-pub mod vector;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 
-pub use clutter::ClutterFilter;
 pub use das::{Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
-pub use doppler::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
 pub use error::{BeamformError, Result};
 pub use grid::Grid;
+pub use num_complex::Complex;
 pub use rf2iq::{to_element_major, to_sample_major, Layout, Rf2Iq, Rf2IqParams, RfSample, RfView};
-pub use rustfft::num_complex::Complex;
-pub use vector::{nominal_projection, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput};
 
 /// Complex f32 sample (I/Q).
 pub type C32 = Complex<f32>;

@@ -9,9 +9,7 @@
 //! Hann main lobe (−6 dB width) 1.3–2.0 times the boxcar one.
 #![allow(clippy::unwrap_used)]
 
-mod common;
-
-use common::{paper_das, RfSim};
+use sonoflow_beamform::testkit::{paper_das, RfSim};
 use sonoflow_beamform::{Apodization, DasPlan, Grid, TxWave};
 use sonoflow_simus::{Scatterers, Transmit};
 

@@ -8,9 +8,7 @@
 //! λ/10 = 31 µm of the scatterer in each direction.
 #![allow(clippy::unwrap_used)]
 
-mod common;
-
-use common::{paper_das, RfSim};
+use sonoflow_beamform::testkit::{paper_das, RfSim};
 use sonoflow_beamform::{DasPlan, Grid, TxWave};
 use sonoflow_simus::{Scatterers, Transmit};
 

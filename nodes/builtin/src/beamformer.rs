@@ -13,7 +13,9 @@ use sonoflow_beamform::{
 };
 use sonoflow_messages::types::{IqFrame, RfFrame};
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::{Complex32, GridV1, IqFrameHeaderV1, MsgHeaderV1, SAMPLE_RF_F32};
+use sonoflow_messages::{
+    Complex32, GridV1, IqFrameHeaderV2, MsgHeaderV1, APODIZATION_BOXCAR, APODIZATION_HANN, SAMPLE_RF_F32,
+};
 use sonoflow_node_kit::parse_params;
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, Flow};
@@ -25,7 +27,7 @@ use std::collections::BTreeMap;
 pub const SPEC: KindSpec = KindSpec {
     name: "beamformer",
     about: "RF → I/Q (MUST rf2iq) → delay-and-sum on a grid, one I/Q image per receive sub-aperture angle",
-    ports: &[port("rf", In, RfFrameV1, true), port("iq", Out, IqFrameV1, true)],
+    ports: &[port("rf", In, RfFrameV2, true), port("iq", Out, IqFrameV2, true)],
     dynamic_inputs: false,
     dynamic_outputs: false,
     validate: validate_beamformer,
@@ -116,8 +118,8 @@ pub struct BeamformerParams {
     /// Interpolation of the I/Q traces: `linear` (default) or `nearest`.
     pub interpolation: Interpolation,
     /// Receive apodisation across each pixel's aperture: `boxcar` (default, MUST) or `hann`
-    /// (side lobes below −31 dB instead of −13 dB, main lobe ~1.6× wider). The Doppler node's
-    /// `aperture.apodization` must name the same, for its projection vectors.
+    /// (side lobes below −31 dB instead of −13 dB, main lobe ~1.6× wider). It travels in the
+    /// I/Q header with the rest of the receive aperture.
     pub apodization: Apodization,
 }
 
@@ -193,7 +195,7 @@ struct PlanKey {
     n_samples: u32,
 }
 
-fn plan_key(h: &sonoflow_messages::RfFrameHeaderV1) -> PlanKey {
+fn plan_key(h: &sonoflow_messages::RfFrameHeaderV2) -> PlanKey {
     PlanKey {
         bits: [h.fs.to_bits(), h.t0.to_bits(), h.fc.to_bits(), h.c.to_bits(), h.pitch.to_bits(), h.tx_angle.to_bits()],
         n_elements: h.n_channels,
@@ -246,7 +248,7 @@ impl Beamformer {
 
     /// Demodulation frequency of receive angle `j` for RF frame `h`: its `demod_fc` or the RF's
     /// centre frequency.
-    pub fn demod_fc(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize) -> f64 {
+    pub fn demod_fc(&self, h: &sonoflow_messages::RfFrameHeaderV2, j: usize) -> f64 {
         self.band_of.get(j).and_then(|&b| self.bands[b].demod_fc).unwrap_or(h.fc)
     }
 
@@ -257,7 +259,7 @@ impl Beamformer {
 
     /// Demodulates one RF frame (element-major f32) and prepares the DAS plans for it. Call
     /// [`Beamformer::image`] for each receive angle afterwards.
-    pub fn demodulate(&mut self, h: &sonoflow_messages::RfFrameHeaderV1, rf: &[f32]) -> anyhow::Result<()> {
+    pub fn demodulate(&mut self, h: &sonoflow_messages::RfFrameHeaderV2, rf: &[f32]) -> anyhow::Result<()> {
         if h.sample_format != SAMPLE_RF_F32 {
             anyhow::bail!("RF frame {}: sample_format {} is not real f32 RF", h.common.frame_id, h.sample_format);
         }
@@ -303,7 +305,7 @@ impl Beamformer {
     }
 
     /// Beamforms the last demodulated frame for receive angle number `j` into `out` (nz·nx).
-    pub fn image(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize, out: &mut [C32]) -> anyhow::Result<()> {
+    pub fn image(&self, h: &sonoflow_messages::RfFrameHeaderV2, j: usize, out: &mut [C32]) -> anyhow::Result<()> {
         let plans = self.plans.get(&plan_key(h)).ok_or_else(|| anyhow::anyhow!("no DAS plan for this frame"))?;
         let plan = plans.get(j).ok_or_else(|| anyhow::anyhow!("receive angle {j} out of range"))?;
         let band = self.band_of.get(j).and_then(|&b| self.bands.get(b));
@@ -313,10 +315,10 @@ impl Beamformer {
     }
 
     /// The I/Q header of receive angle `j` for RF frame `h`.
-    pub fn iq_header(&self, h: &sonoflow_messages::RfFrameHeaderV1, j: usize) -> IqFrameHeaderV1 {
+    pub fn iq_header(&self, h: &sonoflow_messages::RfFrameHeaderV2, j: usize) -> IqFrameHeaderV2 {
         let g = &self.params.grid;
         let n_rx = self.params.rx_angles_deg.len() as u64;
-        let mut ih = IqFrameHeaderV1 {
+        let mut ih = IqFrameHeaderV2 {
             grid: GridV1 { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as u32, nz: g.nz as u32 },
             fc: self.demod_fc(h, j),
             c: h.c,
@@ -326,6 +328,14 @@ impl Beamformer {
             packet: h.packet,
             frame_in_packet: h.frame_in_packet,
             tx_id: h.tx_id,
+            pitch: h.pitch,
+            element_width: h.element_width,
+            fnumber: self.params.fnumber,
+            n_elements: h.n_channels,
+            apodization: match self.params.apodization {
+                Apodization::Boxcar => APODIZATION_BOXCAR,
+                Apodization::Hann => APODIZATION_HANN,
+            },
             ..Default::default()
         };
         ih.common = MsgHeaderV1 {
@@ -387,7 +397,7 @@ mod tests {
     #[test]
     fn demod_fc_sets_the_demodulation_and_the_iq_fc() {
         let (ns, ne, fs) = (400usize, 4usize, 20e6);
-        let h = sonoflow_messages::RfFrameHeaderV1 {
+        let h = sonoflow_messages::RfFrameHeaderV2 {
             fs,
             fc: 5e6,
             c: 1540.0,

@@ -14,7 +14,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec {
     name: "checker",
     about: "verifies test-source frames (× gain) bit for bit and writes <node>.json in the run folder",
-    ports: &[port("rf", In, RfFrameV1, true)],
+    ports: &[port("rf", In, RfFrameV2, true)],
     dynamic_inputs: false,
     dynamic_outputs: false,
     validate: validate_checker,

@@ -13,7 +13,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec {
     name: "gain",
     about: "multiplies RF frames by a constant (a minimal processing stage)",
-    ports: &[port("rf_in", In, RfFrameV1, true), port("rf_out", Out, RfFrameV1, true)],
+    ports: &[port("rf_in", In, RfFrameV2, true), port("rf_out", Out, RfFrameV2, true)],
     dynamic_inputs: false,
     dynamic_outputs: false,
     validate: validate_gain,

@@ -28,7 +28,6 @@ static KINDS: &[KindSpec] = &[
     simus::SPEC,
     beamformer::SPEC,
     doppler::SPEC,
-    doppler::SPEC_LOUPAS,
     regulariser::SPEC,
     evaluator::SPEC,
     recorder::SPEC,

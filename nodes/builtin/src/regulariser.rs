@@ -1,4 +1,4 @@
-//! `regulariser` node: raw vector fields → regularised vector fields with the `sonoflow-smoothn`
+//! `regulariser` node: raw vector fields → regularised vector fields with the `sonoflow-regularise`
 //! library (Garcia's robust, unsupervised `smoothn`; paper 1 after eq 20). Thin: parameters,
 //! plane bookkeeping, publish.
 //!
@@ -15,7 +15,7 @@
 //!   the S used, the outlier fraction (robust weight < 0.5) and whether smoothn converged.
 //!
 //! * `method = "divergence-free"` replaces smoothn by the stream-function fit of
-//!   `sonoflow_smoothn::divfree` (2-D continuity holds exactly; S by block cross-validation,
+//!   `sonoflow_regularise::divfree` (2-D continuity holds exactly; S by block cross-validation,
 //!   noise ratio σx/σz estimated, robust), parameters in the `divergence_free` table. Its data
 //!   weights are those above times a **power mask**: pixels whose `power` plane is more than
 //!   `power_mask_db` (default −15 dB) below its 99th percentile are missing (no blood there; the
@@ -47,7 +47,7 @@ pub const SPEC: KindSpec = KindSpec {
         input_files: &[],
         run,
 };
-use sonoflow_smoothn::{
+use sonoflow_regularise::{
     wall_from_power, DivFree, DivFreeParams, Flavour, NoSlipParams, Smoothn, SmoothnParams, WeightFunction,
 };
 
@@ -367,7 +367,7 @@ impl Regulariser {
         let report =
             match df.fit_with_wall(ux, uz, Some(&self.weights), prior.as_deref(), dp, self.last_s, &mut vx, &mut vz) {
                 Ok(r) => r,
-                Err(sonoflow_smoothn::DivFreeError::NoData) => {
+                Err(sonoflow_regularise::DivFreeError::NoData) => {
                     return Ok(nothing_measured(oh, planes_out, [ivx, ivz], n))
                 }
                 Err(e) => return Err(e.into()),
@@ -576,7 +576,7 @@ mod tests {
         assert!(e_mask < 0.02 && e_none > 3.0 * e_mask, "mean |error| inside: masked {e_mask}, unmasked {e_none}");
         let vx: Vec<f64> = out[..n].iter().map(|&x| x as f64).collect();
         let vz: Vec<f64> = out[n..2 * n].iter().map(|&x| x as f64).collect();
-        let d = sonoflow_smoothn::divfree::divergence(&vx, &vz, [nz as usize, nx as usize], [1e-4, 1e-4]);
+        let d = sonoflow_regularise::divfree::divergence(&vx, &vz, [nz as usize, nx as usize], [1e-4, 1e-4]);
         // f32 output: divergence at the f32 rounding of velocities of 0.5 m/s over 1e-4 m
         assert!(d.iter().all(|x| x.abs() < 1e-2), "{:?}", d.iter().fold(0.0f64, |a, x| a.max(x.abs())));
         let e = validate(&serde_json::json!({"power_mask_db": 5.0})).unwrap_err();

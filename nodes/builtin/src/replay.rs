@@ -87,10 +87,14 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 p.path,
                 recorded.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
-            Some(schema) if *schema != kind.schema_name() => anyhow::bail!(
-                "replay: recorded topic `{rec_topic}` has schema {schema} but graph topic `{}` is {kind}",
-                qos.topic
-            ),
+            Some(schema) if *schema != kind.schema_name() => {
+                MessageType::from_schema_name(schema)
+                    .map_err(|e| anyhow::anyhow!("replay: {}, topic `{rec_topic}`: {e}", p.path))?;
+                anyhow::bail!(
+                    "replay: recorded topic `{rec_topic}` has schema {schema} but graph topic `{}` is {kind}",
+                    qos.topic
+                )
+            }
             Some(_) => {}
         }
         outs.insert(rec_topic.clone(), (kind, kit.dyn_output(qos)?));

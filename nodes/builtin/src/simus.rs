@@ -12,7 +12,7 @@
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::{RfFrameHeaderV1, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
+use sonoflow_messages::{RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
 use sonoflow_node_kit::parse_params;
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, Flow};
@@ -24,7 +24,7 @@ use sonoflow_simus::{FrequencyPlan, Medium, Probe, Simus, SimusError, SimusOptio
 pub const SPEC: KindSpec = KindSpec {
     name: "simus",
     about: "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
-    ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV1, true)],
+    ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV2, true)],
     dynamic_inputs: false,
     dynamic_outputs: false,
     validate,
@@ -215,7 +215,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         kit.stats.messages_in += 1;
         for (tx_id, (angle, tx)) in transmits.iter().enumerate() {
             let t1 = process_cpu_ns();
-            let mut rh = RfFrameHeaderV1 {
+            let mut rh = RfFrameHeaderV2 {
                 fs: pl.fs,
                 t0: pl.t0,
                 fc: probe.fc,
@@ -223,6 +223,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 pitch: probe.pitch,
                 tx_angle: *angle,
                 prf: p.prf,
+                element_width: Some(probe.element_width()).filter(|w| w.is_finite()).unwrap_or(0.0),
                 n_channels: n_el as u32,
                 n_samples: pl.n_samples as u32,
                 tx_id: tx_id as u32,

@@ -62,8 +62,10 @@ enum Cmd {
     Rf2iq(sonoflow_tools::beamform::Rf2IqArgs),
     /// Delay-and-sum batch tool: (n_samples, n_elements) I/Q .npy → complex64 (nz, nx) image .npy.
     Das(sonoflow_tools::beamform::DasArgs),
-    /// Colour Doppler batch tool: (nz, nx, n_frames) packet .npy → velocity, power, variance, flags .npy.
-    Doppler(sonoflow_tools::beamform::DopplerArgs),
+    /// Colour Doppler batch tool (MUST `iq2doppler`): (nz, nx, n_frames) packet .npy → velocity,
+    /// power, variance, flags .npy.
+    #[command(name = "iq2doppler", alias = "doppler")]
+    Iq2doppler(sonoflow_tools::beamform::DopplerArgs),
     /// Platelet suspension (paper 2): resolved Stokes training data, network training.
     Platelet {
         #[command(subcommand)]
@@ -167,7 +169,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Sweep(a) => sonoflow_tools::sweep::run(&a, registry),
         Cmd::Rf2iq(a) => sonoflow_tools::beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow_tools::beamform::run_das(&a),
-        Cmd::Doppler(a) => sonoflow_tools::beamform::run_doppler(&a),
+        Cmd::Iq2doppler(a) => sonoflow_tools::beamform::run_iq2doppler(&a),
         Cmd::Stability(a) => sonoflow_stability::run(&a),
         Cmd::Platelet { what } => sonoflow_tools::platelet::run(&what),
         Cmd::Bench { what } => sonoflow_tools::bench::run(what, registry),

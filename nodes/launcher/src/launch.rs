@@ -50,7 +50,7 @@ fn d_grace() -> f64 {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TopicDecl {
-    /// Message type (`RfFrameV1`, …).
+    /// Message type (`RfFrameV2`, …).
     #[serde(rename = "type")]
     pub message_type: String,
     /// Maximum payload elements per message.
@@ -92,7 +92,7 @@ pub struct NodeDecl {
     /// Arguments of `exec`.
     #[serde(default)]
     pub args: Vec<String>,
-    /// Port types of an `exec` node (`port = "RfFrameV1"`), checked against the topics.
+    /// Port types of an `exec` node (`port = "RfFrameV2"`), checked against the topics.
     #[serde(default)]
     pub ports: BTreeMap<String, String>,
     /// Input port → topic.
@@ -314,20 +314,11 @@ pub fn resolve(
         if !valid_name(name, "/") || name.starts_with('_') {
             errors.push(format!("topic `{name}`: names use letters, digits, `-`, `_`, `/` and do not start with `_`"));
         }
-        match MessageType::from_name(&t.message_type) {
-            Some(k) => {
+        match MessageType::parse(&t.message_type) {
+            Ok(k) => {
                 topic_types.insert(name.clone(), k);
             }
-            None => errors.push(format!(
-                "topics.{name}.type = {:?} is not a message type (allowed: {})",
-                t.message_type,
-                MessageType::ALL
-                    .iter()
-                    .filter(|k| **k != MessageType::StageStatsV1)
-                    .map(|k| k.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )),
+            Err(e) => errors.push(format!("topics.{name}.type: {e}")),
         }
         if !(1..=(1usize << 28)).contains(&t.max_elements) {
             errors.push(format!("topics.{name}.max_elements = {} is out of range: 1 ..= 268435456", t.max_elements));
@@ -482,9 +473,10 @@ pub fn resolve(
                                 }
                             }
                         }
-                        Some((k, None)) => {
-                            errors.push(format!("nodes.{name}.ports.{port} = {k:?} is not a message type"))
-                        }
+                        Some((k, None)) => errors.push(format!(
+                            "nodes.{name}.ports.{port}: {}",
+                            MessageType::parse(k).err().unwrap_or_default()
+                        )),
                         None => errors.push(format!(
                             "node `{name}` (exec): port `{port}` needs its type in `ports = {{ {port} = \"…\" }}`"
                         )),
@@ -726,8 +718,8 @@ mod tests {
 [graph]
 name = "g"
 [topics]
-rf = { type = "RfFrameV1", max_elements = 1024 }
-out = { type = "RfFrameV1", max_elements = 1024 }
+rf = { type = "RfFrameV2", max_elements = 1024 }
+out = { type = "RfFrameV2", max_elements = 1024 }
 [nodes.src]
 kind = "test-source"
 outputs = { rf = "rf" }
@@ -764,7 +756,7 @@ kind = "recorder"
         KindSpec {
             name: "test-source",
             about: "",
-            ports: &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV1, true)],
+            ports: &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV2, true)],
             dynamic_inputs: false,
             dynamic_outputs: false,
             validate: positive_params,
@@ -776,8 +768,8 @@ kind = "recorder"
             name: "gain",
             about: "",
             ports: &[
-                sonoflow_node_kit::port("rf_in", PortDir::In, MessageType::RfFrameV1, true),
-                sonoflow_node_kit::port("rf_out", PortDir::Out, MessageType::RfFrameV1, true),
+                sonoflow_node_kit::port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
+                sonoflow_node_kit::port("rf_out", PortDir::Out, MessageType::RfFrameV2, true),
             ],
             dynamic_inputs: false,
             dynamic_outputs: false,

@@ -3,9 +3,10 @@
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use rand::{Rng, SeedableRng};
-use sonoflow_beamform::{
-    flags, solve_vector, ClutterFilter, DasParams, DasPlan, DopplerEstimator, DopplerParams, Estimator, Grid,
-    Interpolation, Packet, Projection, Rf2Iq, Rf2IqParams, RfView, TxWave, VectorField, VectorInput, C32,
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::{
+    flags, solve_vector, ClutterFilter, DopplerEstimator, DopplerParams, Estimator, Packet, Projection, VectorField,
+    VectorInput,
 };
 use sonoflow_simus::{FrequencyPlan, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 use std::f64::consts::PI;
@@ -432,7 +433,7 @@ fn doppler_map(
     nf: usize,
     est: Estimator,
     nan: Option<(usize, usize)>,
-) -> Result<(sonoflow_beamform::DopplerMap, f64), String> {
+) -> Result<(sonoflow_doppler::DopplerMap, f64), String> {
     let mut frames = packet(steps, nf);
     if let Some((f, p)) = nan {
         frames[f][p] = C32::new(f32::NAN, 0.0);
@@ -445,7 +446,7 @@ fn doppler_map(
     Ok((e.estimate_to_map(Packet::Frames(&refs)).msg()?, vn))
 }
 
-fn map_finite(m: &sonoflow_beamform::DopplerMap) -> bool {
+fn map_finite(m: &sonoflow_doppler::DopplerMap) -> bool {
     m.velocity.iter().chain(&m.variance).chain(&m.power).all(|v| v.is_finite())
 }
 

@@ -102,7 +102,7 @@ pub(super) fn cases() -> Vec<Case> {
             "dangling-input-and-type-mismatch",
             "an input wired to a topic of the wrong type that nobody produces: both problems reported at once",
             Expected::ClearError(&[
-                "carries RfFrameV1 but topic `iq` is IqFrameV1",
+                "carries RfFrameV2 but topic `iq` is IqFrameV2",
                 "topic `iq` is consumed by checker but no node produces it",
             ]),
             dangling,
@@ -420,7 +420,7 @@ const GOOD: &str = r#"
 [graph]
 name = "g"
 [topics]
-rf = { type = "RfFrameV1", max_elements = 1024 }
+rf = { type = "RfFrameV2", max_elements = 1024 }
 [nodes.source]
 kind = "test-source"
 outputs = { rf = "rf" }
@@ -456,7 +456,7 @@ fn dangling(_: &Ctx) -> CaseResult {
     check_text(
         &GOOD
             .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
-            .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV1\", max_elements = 10 }\n"),
+            .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV2\", max_elements = 10 }\n"),
         &[],
         &[],
     )

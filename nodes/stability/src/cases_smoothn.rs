@@ -1,4 +1,4 @@
-//! smoothn cases (from `nodes/smoothn/tests/extremes.rs` and `robustness.rs`, plus 90 % missing
+//! smoothn cases (from `nodes/regularise/tests/extremes.rs` and `robustness.rs`, plus 90 % missing
 //! data and 200 decades of scale), and the divergence-free regulariser (`smoothn::divfree`): no
 //! data, 200 decades of scale, extreme noise anisotropy, the smallest grid, a one-pixel-wide
 //! data line and the S bounds (conditioning).
@@ -7,8 +7,8 @@ use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::divfree::divergence;
-use sonoflow_smoothn::{smoothn, DivFree, DivFreeParams, SmoothnParams};
+use sonoflow_regularise::divfree::divergence;
+use sonoflow_regularise::{smoothn, DivFree, DivFreeParams, SmoothnParams};
 
 pub(super) fn cases() -> Vec<Case> {
     fn c(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
@@ -444,7 +444,7 @@ fn negative_weight(_: &Ctx) -> CaseResult {
 }
 
 fn df_no_slip(_: &Ctx) -> CaseResult {
-    use sonoflow_smoothn::{wall_from_power, NoSlipParams};
+    use sonoflow_regularise::{wall_from_power, NoSlipParams};
     let (nz, nx) = (24, 32);
     let n = nz * nx;
     let mut parts = vec![];

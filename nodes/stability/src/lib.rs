@@ -44,7 +44,7 @@ pub enum Stage {
     Beamform,
     /// Colour / vector Doppler and clutter filter (`sonoflow-beamform`).
     Doppler,
-    /// Robust DCT smoothing (`sonoflow-smoothn`).
+    /// Robust DCT smoothing (`sonoflow-regularise`).
     Smoothn,
     /// Analytic flow phantoms (`sonoflow-analytic-flow`).
     AnalyticFlow,

@@ -36,9 +36,9 @@
 
 use serde::Deserialize;
 use sonoflow_beamform::{
-    flags, to_element_major, to_sample_major, DasParams, DasPlan, DopplerEstimator, DopplerParams, Estimator, Grid,
-    Interpolation, Packet, Rf2Iq, Rf2IqParams, RfView, TxWave, WindowShape, C32,
+    to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
 };
+use sonoflow_doppler::{flags, DopplerEstimator, DopplerParams, Estimator, Packet, WindowShape};
 use std::path::{Path, PathBuf};
 
 /// The MUST-named keys the beamforming tools read; every other key is ignored.
@@ -483,7 +483,7 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
 }
 
 /// Runs `sonoflow doppler`.
-pub fn run_doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
+pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
     let (power_path, var_path, flags_path) =
         (sibling(&a.out, "power"), sibling(&a.out, "variance"), sibling(&a.out, "flags"));
     check_out(&a.out, &[&a.packet, &a.param])?;

@@ -1,12 +1,12 @@
 //! `sonoflow smoothn`: the smoothn batch tool. Reads a field from `.npy` — shape
 //! `(components, ny, nx)` (a vector field, components smoothed jointly) or `(ny, nx)` (a scalar
 //! field); `--scalar` treats every axis of any array as a grid axis — smooths it with the
-//! `sonoflow-smoothn` library and writes the result (float64, same shape) plus a JSON sidecar
+//! `sonoflow-regularise` library and writes the result (float64, same shape) plus a JSON sidecar
 //! with the S used, convergence and the outlier fraction. NaN/±inf in the input are missing
 //! values and are filled. `--divergence-free` fits a stream function instead (a `(2, nz, nx)`
-//! field: vx then vz, rows along z; `sonoflow_smoothn::divfree`).
+//! field: vx then vz, rows along z; `sonoflow_regularise::divfree`).
 
-use sonoflow_smoothn::{
+use sonoflow_regularise::{
     wall_from_power, DivFree, DivFreeParams, Flavour, NoSlipParams, Smoothn, SmoothnParams, WeightFunction,
 };
 use std::path::{Path, PathBuf};

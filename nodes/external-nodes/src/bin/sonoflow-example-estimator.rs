@@ -5,7 +5,7 @@
 //! ```toml
 //! [nodes.doppler.variants.external]
 //! exec = "sonoflow-example-estimator"
-//! ports = { iq = "IqFrameV1", vector = "VectorFieldV1", maps = "DopplerMapV1" }
+//! ports = { iq = "IqFrameV2", vector = "VectorFieldV1", maps = "DopplerMapV1" }
 //! ```
 //! `sonoflow run launch/quickstart.toml --swap doppler=external`.
 //!
@@ -17,7 +17,7 @@
 
 use sonoflow_messages::types::{DopplerMap, IqFrame, VectorField};
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV1, IqFrameHeaderV1, MsgHeaderV1, VectorFieldHeaderV1, VECTOR_RAW,
+    plane, Complex32, DopplerMapHeaderV1, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, VECTOR_RAW,
 };
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Kit, Output};
 use std::collections::BTreeMap;
@@ -28,14 +28,15 @@ use std::time::Duration;
 struct Params {
     /// Slow-time lag (1 ..= 16).
     lag: usize,
-    /// The built-in node's receive-aperture table: accepted so that the same launch file works,
-    /// but this example always uses the nominal plane-wave projection (it says so at start).
-    aperture: Option<serde_json::Value>,
+    /// The built-in node's `projection` choice: accepted so that the same launch file works,
+    /// but this example always uses the nominal plane-wave projection (it says so at start)
+    /// and ignores the receive aperture in the I/Q headers.
+    projection: Option<String>,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { lag: 1, aperture: None }
+        Self { lag: 1, projection: None }
     }
 }
 
@@ -50,7 +51,7 @@ fn main() {
 
 /// Frames of one (transmit, receive) angle pair within the current packet.
 struct Pair {
-    header: IqFrameHeaderV1,
+    header: IqFrameHeaderV2,
     frames: Vec<Vec<Complex32>>,
 }
 
@@ -65,9 +66,9 @@ fn run() -> Result<(), Error> {
     if !(1..=16).contains(&p.lag) {
         return Err(format!("params.lag = {} is out of range: 1 ..= 16", p.lag).into());
     }
-    if p.aperture.is_some() {
+    if p.projection.as_deref().is_some_and(|m| m != "nominal") {
         eprintln!(
-            "sonoflow-example-estimator: `aperture` ignored: this estimator uses the nominal plane-wave projection"
+            "sonoflow-example-estimator: `projection` ignored: this estimator uses the nominal plane-wave projection"
         );
     }
     let mut input = kit.input::<IqFrame>("iq")?;

@@ -4,7 +4,7 @@
 //! ```toml
 //! [nodes.gain]
 //! exec = "sonoflow-example-gain"
-//! ports = { rf_in = "RfFrameV1", rf_out = "RfFrameV1" }
+//! ports = { rf_in = "RfFrameV2", rf_out = "RfFrameV2" }
 //! inputs = { rf_in = "rf" }
 //! outputs = { rf_out = "rf_gain" }
 //! params = { gain = 2.0 }

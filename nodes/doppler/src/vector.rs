@@ -4,7 +4,7 @@
 //! A Doppler velocity measured with transmit direction θt and receive direction θr (angles from
 //! the z axis, positive towards +x) is the projection of the velocity on the bisector:
 //! `v_D = a·v`, `a = −(sin θt + sin θr, cos θt + cos θr)/2` with v_D positive toward the probe
-//! (MUST's sign, [`crate::doppler`]). Derivation: the round-trip delay of a scatterer at p is
+//! (MUST's sign, [`crate::estimator`]). Derivation: the round-trip delay of a scatterer at p is
 //! `τ = (d_TX + d_RX)/c`; moving it by v·T changes τ by `(û_t + û_r)·v T/c` where û_t = (sin θt,
 //! cos θt) is the transmit propagation direction and û_r = (sin θr, cos θr) the direction from
 //! the receive aperture to p; v_D = −c Δτ/(2T).
@@ -13,11 +13,11 @@
 //! exact solve). For θt = 0 and θr = ±φ this gives `vx = (v_D(−φ) − v_D(+φ))/sin φ`,
 //! `vz = −(v_D(−φ) + v_D(+φ))/(1 + cos φ)`, i.e. the paper's eq. 20 with its Doppler values of
 //! the opposite sign (paper: positive = away from the probe along the bisector, +z downwards).
-//! The per-pixel projections of a [`crate::DasPlan`] ([`crate::DasPlan::projection`]) account
+//! The per-pixel projections of a [`sonoflow_beamform::DasPlan`] ([`sonoflow_beamform::DasPlan::projection`]) account
 //! for the actual (possibly clipped) aperture; the nominal ones assume an ideal plane wave.
 
-use crate::doppler::flags;
-use crate::error::{check_len, invalid, BeamformError, Result};
+use crate::estimator::flags;
+use sonoflow_beamform::error::{check_len, invalid, BeamformError, Result};
 
 /// Projection vector `a` for transmit tilt `tx_tilt` and receive angle `rx_angle` (rad).
 pub fn nominal_projection(tx_tilt: f64, rx_angle: f64) -> [f64; 2] {
@@ -34,7 +34,7 @@ pub enum Projection<'a> {
         /// Receive angle (rad).
         rx_angle: f64,
     },
-    /// One vector per pixel (e.g. [`crate::DasPlan::projection`]).
+    /// One vector per pixel (e.g. [`sonoflow_beamform::DasPlan::projection`]).
     PerPixel(&'a [[f32; 2]]),
 }
 

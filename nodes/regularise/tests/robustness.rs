@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 mod common;
 use common::*;
-use sonoflow_smoothn::{smoothn, SmoothnParams, WeightFunction};
+use sonoflow_regularise::{smoothn, SmoothnParams, WeightFunction};
 
 const NY: usize = 64;
 const NX: usize = 64;
@@ -44,11 +44,11 @@ fn outlier_fraction_counts_points_with_final_weight_below_one_half() {
     let truth = smooth_field(NY, NX);
     let (y, mask) = corrupt(&truth, 2, 0.1, 0.1, 21);
     let p = SmoothnParams { robust: true, ..SmoothnParams::default() };
-    let mut ws = sonoflow_smoothn::Smoothn::new(&[NY, NX], 2).unwrap();
+    let mut ws = sonoflow_regularise::Smoothn::new(&[NY, NX], 2).unwrap();
     let mut z = vec![0.0; y.len()];
     let r = ws.smooth(&y, None, &p, &mut z).unwrap();
     let w = ws.robust_weights();
-    let low = w.iter().filter(|v| **v < sonoflow_smoothn::OUTLIER_WEIGHT).count();
+    let low = w.iter().filter(|v| **v < sonoflow_regularise::OUTLIER_WEIGHT).count();
     assert_eq!(r.outlier_fraction, low as f64 / w.len() as f64);
     // The flagged points are the corrupted ones: ≥ 90 % of flagged points were drawn as outliers.
     let hits = w.iter().zip(&mask).filter(|(v, m)| **v < 0.5 && **m).count();

@@ -18,10 +18,8 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sonoflow_beamform::{
-    DasParams, DasPlan, DopplerEstimator, DopplerParams, Grid, Interpolation, Packet, Rf2Iq, Rf2IqParams, RfView,
-    TxWave, C32,
-};
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::{DopplerEstimator, DopplerParams, Packet};
 use sonoflow_simus::{Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
 const PRF: f64 = 10e3;

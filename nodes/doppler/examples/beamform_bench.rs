@@ -3,7 +3,7 @@
 //! packet. `bench/beamform/side_by_side.sh` runs it next to PyMUST on the same data.
 //!
 //! ```text
-//! cargo run --release -p sonoflow-beamform --example beamform_bench -- [--reps N] [--write DIR]
+//! cargo run --release -p sonoflow-doppler --example beamform_bench -- [--reps N] [--write DIR]
 //! ```
 //! `--write DIR` stores rf.npy (float32, n_samples × 128), das.npy (complex64 200×200, frame 0),
 //! packet.npy (complex64 200×200×32), velocity.npy (float32 200×200) and rust.json (timings).
@@ -12,10 +12,8 @@
 use std::io::Write;
 use std::time::Instant;
 
-use sonoflow_beamform::{
-    DasParams, DasPlan, DopplerEstimator, DopplerParams, Grid, Interpolation, Packet, Rf2Iq, Rf2IqParams, RfView,
-    TxWave, C32,
-};
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::{DopplerEstimator, DopplerParams, Packet};
 
 fn npy(path: &std::path::Path, descr: &str, shape: &[usize], bytes: &[u8]) {
     let shape_s = shape.iter().map(|s| format!("{s},")).collect::<String>();

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::needless_range_loop)] // test helpers; dense linear algebra by index
 mod common;
 use common::*;
-use sonoflow_smoothn::{smoothn, SmoothnParams};
+use sonoflow_regularise::{smoothn, SmoothnParams};
 
 /// Dense N-D Neumann Laplacian `Σ_a L_a / dI_a²` (row-major grid), `L_a = tridiag(−1, 2, −1)` with
 /// 1 in the first and last diagonal entries (its eigenvectors are the DCT-II basis).

@@ -81,7 +81,7 @@
 //!
 //! # Example
 //! ```
-//! use sonoflow_smoothn::{smoothn, SmoothnParams};
+//! use sonoflow_regularise::{smoothn, SmoothnParams};
 //! let (ny, nx) = (20, 30);
 //! let mut field = vec![0.0; 2 * ny * nx]; // (u, v) components
 //! for (i, v) in field.iter_mut().enumerate() {

@@ -6,10 +6,10 @@
 //! projection is subtracted: order 0 removes the mean, order 1 also a linear drift, …
 //! A signal that is a polynomial of degree ≤ order is removed exactly (to rounding).
 
-use rustfft::num_complex::Complex;
+use num_complex::Complex;
 
-use crate::error::{check_len, invalid, Result};
-use crate::C32;
+use sonoflow_beamform::error::{check_len, invalid, Result};
+use sonoflow_beamform::C32;
 
 /// Polynomial-regression clutter filter for packets of `n_frames`.
 #[derive(Clone, Debug)]

@@ -3,14 +3,13 @@
 //! vector solve recovers (vx, vz), for a 0° and a 10° steered transmit.
 #![allow(clippy::unwrap_used)]
 
-mod common;
-
-use common::{paper_das, RfSim};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sonoflow_beamform::{
-    flags, nominal_projection, solve_vector, DasPlan, DopplerEstimator, DopplerParams, Estimator, Grid, Packet,
-    Projection, TxWave, VectorField, VectorInput, C32,
+use sonoflow_beamform::testkit::{paper_das, RfSim};
+use sonoflow_beamform::{DasPlan, Grid, TxWave, C32};
+use sonoflow_doppler::{
+    flags, nominal_projection, solve_vector, DopplerEstimator, DopplerParams, Estimator, Packet, Projection,
+    VectorField, VectorInput,
 };
 use sonoflow_simus::{Scatterers, Transmit};
 

@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used)]
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sonoflow_smoothn::dct::{Dct1d, DctN};
+use sonoflow_regularise::dct::{Dct1d, DctN};
 
 /// Naive O(n²) orthonormal DCT-II (test reference only).
 fn naive_dct2(x: &[f64]) -> Vec<f64> {

@@ -5,11 +5,11 @@
 //! block cross-validation from a cold start and warm-started at the chosen S, robust and not,
 //! with the number of Cholesky factorisations each needed and the RMS errors.
 //!
-//! `cargo run --release -p sonoflow-smoothn --example divfree_bench [-- NZ NX]`
+//! `cargo run --release -p sonoflow-regularise --example divfree_bench [-- NZ NX]`
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::{smoothn, DivFree, DivFreeParams, SmoothnParams};
+use sonoflow_regularise::{smoothn, DivFree, DivFreeParams, SmoothnParams};
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

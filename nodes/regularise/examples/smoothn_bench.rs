@@ -2,7 +2,7 @@
 //! 10 % gross outliers), reusing one workspace across repeats.
 //!
 //! ```text
-//! cargo run --release -p sonoflow-smoothn --example smoothn_bench -- \
+//! cargo run --release -p sonoflow-regularise --example smoothn_bench -- \
 //!     [--in field.npy] [--out smoothed.npy] [--ny 200] [--nx 200] [--repeats 20] [--flavour matlab|pymust]
 //! ```
 //! `--in` reads a float64 C-order `.npy` of shape (components, ny, nx) (as written by
@@ -13,7 +13,7 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::{Flavour, Smoothn, SmoothnParams};
+use sonoflow_regularise::{Flavour, Smoothn, SmoothnParams};
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 

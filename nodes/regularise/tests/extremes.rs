@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 mod common;
 use common::*;
-use sonoflow_smoothn::{smoothn, Smoothn, SmoothnError, SmoothnParams, WeightFunction};
+use sonoflow_regularise::{smoothn, Smoothn, SmoothnError, SmoothnParams, WeightFunction};
 
 fn robust_auto() -> SmoothnParams {
     SmoothnParams { robust: true, ..SmoothnParams::default() }

@@ -10,7 +10,7 @@
 mod common;
 use common::*;
 use serde_json::Value;
-use sonoflow_smoothn::{smoothn, Flavour, SmoothnParams, SmoothnReport};
+use sonoflow_regularise::{smoothn, Flavour, SmoothnParams, SmoothnReport};
 use std::path::PathBuf;
 
 fn data_dir() -> PathBuf {

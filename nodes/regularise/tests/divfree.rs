@@ -6,8 +6,8 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::divfree::divergence;
-use sonoflow_smoothn::{smoothn, DivFree, DivFreeError, DivFreeParams, Selection, SmoothnParams};
+use sonoflow_regularise::divfree::divergence;
+use sonoflow_regularise::{smoothn, DivFree, DivFreeError, DivFreeParams, Selection, SmoothnParams};
 
 const NZ: usize = 40;
 const NX: usize = 60;

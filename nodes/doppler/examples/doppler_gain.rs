@@ -2,10 +2,8 @@
 #![allow(clippy::unwrap_used)]
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sonoflow_beamform::{
-    DasParams, DasPlan, DopplerEstimator, DopplerParams, Estimator, Grid, Interpolation, Packet, Rf2Iq, Rf2IqParams,
-    RfView, TxWave, C32,
-};
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::{DopplerEstimator, DopplerParams, Estimator, Packet};
 use sonoflow_simus::{Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
 fn arg(name: &str, def: f64) -> f64 {

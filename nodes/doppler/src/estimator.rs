@@ -31,13 +31,13 @@
 //! Arithmetic is f64 (per-pixel sums in frame order, windows in fixed order); pixels run in
 //! parallel over rows and the results do not depend on the thread count.
 
+use num_complex::Complex;
 use rayon::prelude::*;
-use rustfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
-use crate::das::DasPlan;
-use crate::error::{check_len, invalid, positive, BeamformError, Result};
-use crate::C32;
+use sonoflow_beamform::error::{check_len, invalid, positive, BeamformError, Result};
+use sonoflow_beamform::DasPlan;
+use sonoflow_beamform::C32;
 
 type C64 = Complex<f64>;
 

@@ -1,9 +1,12 @@
-//! Shared helpers of the integration tests: a small .npy reader, nRMS, simus scenes.
-#![allow(dead_code, clippy::unwrap_used)]
+//! Test fixtures (feature `testkit`), shared by this crate's tests, `sonoflow-doppler`'s tests and
+//! the stability matrix: the PyMUST reference data (`tests/data`, with a small .npy reader that
+//! keeps complex128 values), nRMS, the paper probe's DAS parameters and SIMUS scenes. Test code:
+//! it panics on a missing data file or a failed simulation.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
 
-use sonoflow_beamform::{Complex, C32};
+use crate::{Complex, C32};
 
 /// Directory of the PyMUST reference data.
 pub fn data_dir() -> PathBuf {
@@ -80,7 +83,7 @@ pub fn nrms_c(a: &[C32], b: &[Complex<f64>]) -> f64 {
     (num / den).sqrt()
 }
 
-use sonoflow_beamform::{DasParams, Interpolation, Rf2Iq, Rf2IqParams, RfView};
+use crate::{DasParams, Interpolation, Rf2Iq, Rf2IqParams, RfView};
 use sonoflow_simus::{Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
 /// Paper probe DAS parameters (5 MHz, 128 elements, pitch 0.3 mm, fs 20 MHz).

@@ -5,7 +5,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_smoothn::{wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams};
+use sonoflow_regularise::{wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams};
 
 const NZ: usize = 40;
 const NX: usize = 60;

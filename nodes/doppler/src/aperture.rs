@@ -1,0 +1,194 @@
+//! Per-pixel Doppler projection vectors through the beamformer's receive aperture.
+//!
+//! A plane wave transmitted at tilt θt and received by the elements e of the aperture that the
+//! delay-and-sum beamformer sums at pixel p measures `a · v` with
+//! `a = −(sin θt + ⟨sin θe⟩, cos θt + ⟨cos θe⟩)/2`, the receive direction averaged over those
+//! elements (the DAS aperture rule of `sonoflow-beamform`: centred on the line through the pixel
+//! at the receive angle, width `z/(F cos rx)`, clipped by the array). Near the array's edge a
+//! steered sub-aperture loses its oblique elements, so the nominal plane-wave projection
+//! ([`crate::nominal_projection`]) over-states the lateral sensitivity there.
+
+use serde::{Deserialize, Serialize};
+use sonoflow_beamform::error::{invalid, Result};
+use sonoflow_beamform::{Apodization, Grid};
+
+/// The receive geometry of a beamformed image (MUST names): what the I/Q frame header carries.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Aperture {
+    /// Element pitch (m).
+    pub pitch: f64,
+    /// Number of elements.
+    #[serde(alias = "Nelements")]
+    pub n_elements: usize,
+    /// Receive f-number, as in the beamformer (0 = the whole array at every pixel).
+    pub fnumber: f64,
+    /// Element width (m, ≤ pitch). When given, each element's direction is weighted by the
+    /// amplitude it receives from the pixel — directivity `sinc(π·width·sin θ/λ)`, soft-baffle
+    /// obliquity `cos θ` and 2-D spreading `r^−½` at fc — because the phase of the summed echo,
+    /// hence the Doppler shift, follows the strong (near-normal) elements. Absent: equal weights.
+    #[serde(default)]
+    pub width: Option<f64>,
+    /// Receive apodisation, as the beamformer's `apodization`: the element weights of the mean
+    /// receive direction.
+    #[serde(default)]
+    pub apodization: Apodization,
+}
+
+impl Aperture {
+    /// Checks every field (errors name the field as `aperture.<field>`).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.fnumber.is_finite() && (0.0..=1000.0).contains(&self.fnumber)) {
+            return Err(invalid("aperture.fnumber", self.fnumber, "in [0, 1000] (0 = full aperture)"));
+        }
+        if !(self.pitch.is_finite() && self.pitch > 0.0 && self.pitch < 0.1) {
+            return Err(invalid("aperture.pitch", self.pitch, "in (0, 0.1) m"));
+        }
+        if !(1..=65536).contains(&self.n_elements) {
+            return Err(invalid("aperture.n_elements", self.n_elements, "in 1 ..= 65536"));
+        }
+        if let Some(w) = self.width {
+            if !(w.is_finite() && w > 0.0 && w <= self.pitch) {
+                return Err(invalid("aperture.width", w, "in (0, pitch] m"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Per-pixel Doppler projection vectors `[a_x, a_z]` (row-major on `grid`) of a plane-wave
+/// transmit at `tx` and receive angle `rx` (rad) through the aperture `a`, at centre frequency
+/// `fc` and speed of sound `c` (for the element directivity). A pixel that no element reaches
+/// gets `[0, 0]`.
+pub fn aperture_projection(a: &Aperture, fc: f64, c: f64, tx: f64, rx: f64, grid: &Grid) -> Result<Vec<[f32; 2]>> {
+    a.validate()?;
+    if !(fc.is_finite() && fc > 0.0) {
+        return Err(invalid("fc", fc, "finite and > 0"));
+    }
+    if !(c.is_finite() && c > 0.0) {
+        return Err(invalid("c", c, "finite and > 0"));
+    }
+    let lambda = c / fc;
+    let xe: Vec<f64> = (0..a.n_elements).map(|e| (e as f64 - (a.n_elements as f64 - 1.0) / 2.0) * a.pitch).collect();
+    let (tan_rx, cos_rx) = (rx.tan(), rx.cos());
+    let mut out = Vec::with_capacity(grid.nx * grid.nz);
+    for iz in 0..grid.nz {
+        let z = grid.z(iz);
+        for ix in 0..grid.nx {
+            let x = grid.x(ix);
+            let (mut sw, mut ss, mut sc) = (0.0f64, 0.0f64, 0.0f64);
+            for &e in &xe {
+                let dx = x - e;
+                // offset from the aperture's centre and its half-width (the beamformer's rule)
+                let (off, half) = match (a.fnumber > 0.0, rx == 0.0) {
+                    (false, _) => (0.0, f64::INFINITY),
+                    (true, true) => (dx, z / 2.0 / a.fnumber),
+                    (true, false) => (dx - z * tan_rx, z / cos_rx / 2.0 / a.fnumber),
+                };
+                let r = dx.hypot(z);
+                if off.abs() > half || r <= 0.0 {
+                    continue;
+                }
+                let aw = if half.is_finite() { a.apodization.weight(-off / (2.0 * half)) } else { 1.0 };
+                let (sin_t, cos_t) = (dx / r, z / r);
+                let w = aw
+                    * match a.width {
+                        None => 1.0,
+                        Some(width) => {
+                            let u = std::f64::consts::PI * width * sin_t / lambda;
+                            let sinc = if u.abs() < 1e-12 { 1.0 } else { u.sin() / u };
+                            (sinc * cos_t).abs() / r.sqrt()
+                        }
+                    };
+                sw += w;
+                ss += w * sin_t;
+                sc += w * cos_t;
+            }
+            out.push(if sw > 0.0 {
+                [(-(tx.sin() + ss / sw) / 2.0) as f32, (-(tx.cos() + sc / sw) / 2.0) as f32]
+            } else {
+                [0.0, 0.0]
+            });
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::nominal_projection;
+    use sonoflow_beamform::{DasParams, DasPlan, Interpolation, TxWave};
+
+    #[test]
+    fn aperture_projection_is_nominal_inside_the_array_and_clipped_at_its_edge() {
+        let a =
+            Aperture { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5, width: None, apodization: Apodization::Boxcar };
+        // Two pixels at 20 mm depth: x = 0 (both ±15° sub-apertures inside the 38 mm array) and
+        // x = 12 mm (the −15° sub-aperture, centred at x + 5.4 mm, is clipped by the edge at 19 mm).
+        let grid = Grid { x0: 0.0, z0: 0.02, dx: 12e-3, dz: 1e-3, nx: 2, nz: 1 };
+        let rx = (-15f64).to_radians();
+        let p = aperture_projection(&a, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+        let nom = nominal_projection(0.0, rx);
+        // Centre: the mean direction over a ±18° aperture about −15° is close to −15° itself.
+        assert!((p[0][0] as f64 - nom[0]).abs() < 0.01 && (p[0][1] as f64 - nom[1]).abs() < 0.01, "{p:?} vs {nom:?}");
+        // Edge: fewer oblique elements, so the lateral sensitivity |a_x| shrinks.
+        assert!((p[1][0] as f64).abs() < 0.9 * nom[0].abs(), "{p:?} vs {nom:?}");
+        assert!(aperture_projection(&Aperture { fnumber: -1.0, ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).is_err());
+        // Same aperture rule and element weights as the beamformer's DAS plan: its (apodisation-
+        // weighted) mean delay gradient gives the same projection (float32 gradients: 1e-4), for
+        // equal weights and for the Hann window, which leans on the central elements (a_x closer
+        // to nominal than with equal weights).
+        let mut hann = Vec::new();
+        for apodization in [Apodization::Boxcar, Apodization::Hann] {
+            let dp = DasParams {
+                fc: 5e6,
+                c: 1540.0,
+                fs: 20e6,
+                t0: 0.0,
+                pitch: a.pitch,
+                n_elements: a.n_elements,
+                fnumber: a.fnumber,
+                rx_angle: rx,
+                interpolation: Interpolation::Linear,
+                apodization,
+            };
+            let q = aperture_projection(&Aperture { apodization, ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+            let plan = DasPlan::new(&dp, &TxWave::PlaneWave { tilt: 0.0 }, &grid, 4000).unwrap().projection();
+            for (q, r) in q.iter().zip(&plan) {
+                assert!((q[0] - r[0]).abs() < 1e-4 && (q[1] - r[1]).abs() < 1e-4, "{apodization:?}: {q:?} vs {plan:?}");
+            }
+            hann = q;
+        }
+        assert!(
+            hann[0] != p[0] && (f64::from(hann[0][0]) - nom[0]).abs() < (f64::from(p[0][0]) - nom[0]).abs(),
+            "{hann:?} vs {p:?}"
+        );
+        // Amplitude weights (element width 0.265 mm at 5 MHz): the oblique elements of the −15°
+        // sub-aperture receive less, so the effective receive angle and |a_x| are smaller.
+        let wp =
+            aperture_projection(&Aperture { width: Some(0.265e-3), ..a.clone() }, 5e6, 1540.0, 0.0, rx, &grid).unwrap();
+        assert!(wp[0][0].abs() < 0.95 * p[0][0].abs() && wp[0][0].abs() > 0.5 * p[0][0].abs(), "{wp:?} vs {p:?}");
+        // Full aperture (F# 0) at normal receive: every element counts, so at the array centre
+        // the lateral components cancel (a_x = 0 by symmetry) and a_z = −(1 + ⟨cos θe⟩)/2 lies
+        // between the nominal −1 and the F# 1.5 value's.
+        let full = aperture_projection(&Aperture { fnumber: 0.0, ..a }, 5e6, 1540.0, 0.0, 0.0, &grid).unwrap();
+        assert!(full[0][0].abs() < 1e-6, "{full:?}");
+        assert!(full[0][1] > -1.0 && full[0][1] < -0.8, "{full:?}");
+    }
+
+    #[test]
+    fn bad_apertures_name_the_field() {
+        let a =
+            Aperture { pitch: 0.3e-3, n_elements: 128, fnumber: 1.5, width: None, apodization: Apodization::Boxcar };
+        let field = |b: Aperture| match b.validate() {
+            Err(sonoflow_beamform::BeamformError::InvalidParameter { field, .. }) => field,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(field(Aperture { pitch: 0.0, ..a.clone() }), "aperture.pitch");
+        assert_eq!(field(Aperture { n_elements: 0, ..a.clone() }), "aperture.n_elements");
+        assert_eq!(field(Aperture { fnumber: f64::NAN, ..a.clone() }), "aperture.fnumber");
+        assert_eq!(field(Aperture { width: Some(0.4e-3), ..a }), "aperture.width");
+    }
+}

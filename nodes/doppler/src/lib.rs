@@ -1,0 +1,30 @@
+//! Slow-time processing of beamformed I/Q packets (Shahriari & Garcia 2018, PMB 63:205011,
+//! eq. 19–20; MUST/PyMUST 0.1.9 `iq2doppler`):
+//!
+//! 1. [`ClutterFilter`] ([`clutter`]): polynomial-regression high-pass over slow time.
+//! 2. [`DopplerEstimator`] ([`estimator`]): lag-L autocorrelation (eq. 19) or Loupas 2-D
+//!    autocorrelator, spatial window, power, variance and per-pixel flags.
+//! 3. [`solve_vector`] ([`vector`]): least-squares (vx, vz) from two or more looks (eq. 20),
+//!    nominal or per-pixel projections, optional per-look weights.
+//! 4. [`aperture_projection`] ([`aperture`]): per-pixel Doppler projection vectors through the
+//!    beamformer's receive aperture (the array edge clips steered sub-apertures).
+//! 5. [`PacketAssembler`] ([`packet`]): collects a packet's images per look (transmit tilt,
+//!    receive angle, fc), estimates one map per look and solves the vector velocity with
+//!    fc²-weighted looks and band-normalised power: what the `doppler` node does, without IPC.
+//!
+//! Units are SI; x lateral, z depth. Doppler velocities are positive toward the probe. Errors are
+//! `sonoflow_beamform`'s [`BeamformError`] (the field names say which stage).
+
+pub mod aperture;
+pub mod clutter;
+pub mod estimator;
+pub mod packet;
+pub mod vector;
+
+pub use aperture::{aperture_projection, Aperture};
+pub use clutter::ClutterFilter;
+pub use estimator::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
+pub use packet::{mean_power, LookHeader, LookMap, PacketAssembler, PacketParams, PacketProducts, ProjectionMode};
+pub use sonoflow_beamform::error::{BeamformError, Result};
+pub use sonoflow_beamform::{Grid, C32};
+pub use vector::{nominal_projection, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput};
