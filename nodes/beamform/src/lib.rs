@@ -21,6 +21,7 @@ pub mod butterworth;
 pub mod das;
 pub mod error;
 pub mod grid;
+pub mod multilook;
 pub mod rf2iq;
 #[cfg(feature = "testkit")]
 pub mod testkit;
@@ -28,6 +29,7 @@ pub mod testkit;
 pub use das::{Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
 pub use error::{BeamformError, Result};
 pub use grid::Grid;
+pub use multilook::{BeamformerParams, MultiLookBeamformer, PerAngle, RfInfo};
 pub use num_complex::Complex;
 pub use rf2iq::{to_element_major, to_sample_major, Layout, Rf2Iq, Rf2IqParams, RfSample, RfView};
 

@@ -1,24 +1,16 @@
 //! `simus` node: particle snapshots → RF frames (one per scheduled transmit) with the
-//! `sonoflow-simus` library (MUST's SIMUS). Thin: parameters, frequency plan per packet, publish.
-//!
-//! The frequency plan (df, band, RF length) is fixed for a whole packet — computed at the first
-//! frame of each packet for the scatterers' largest element distance plus `plan_margin` — so
-//! every frame of a packet has the same length and gain (MUST re-plans per call, which changes the
-//! gain ∝ df between frames of a moving scene). If scatterers move beyond the margin within a
-//! packet the plan is recomputed and a warning printed.
+//! `sonoflow-simus` library (MUST's SIMUS). Thin: the scan (`sonoflow_simus::ScanParams`) and
+//! its per-packet frequency plan (`FramePlanner`) come from the library; this file wires the
+//! topics and fills the RF headers (element width included, for the beamformer's I/Q headers).
 //!
 //! Compute time per message is process CPU time (SIMUS runs on a rayon pool).
 
-use serde::{Deserialize, Serialize};
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
-use sonoflow_node_kit::parse_params;
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, Flow};
-use sonoflow_node_kit::{port, KindSpec};
-use sonoflow_node_kit::{process_cpu_ns, Kit};
-use sonoflow_simus::{FrequencyPlan, Medium, Probe, Simus, SimusError, SimusOptions, Transmit};
+use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
+use sonoflow_simus::{FramePlanner, Scan, ScanParams, Simus, SimusError};
 
 /// The `simus` node kind.
 pub const SPEC: KindSpec = KindSpec {
@@ -33,150 +25,22 @@ pub const SPEC: KindSpec = KindSpec {
     run,
 };
 
-/// A probe given by MUST preset name or in full.
-#[derive(Clone, Debug, Deserialize, Serialize)]
-#[serde(untagged)]
-pub enum ProbeSpec {
-    /// Preset name (`paper-5mhz`, `L11-5v`, …).
-    Preset(String),
-    /// Full description.
-    Full(Probe),
-}
-
-impl ProbeSpec {
-    pub fn resolve(&self) -> Result<Probe, SimusError> {
-        match self {
-            ProbeSpec::Preset(n) => Probe::preset(n),
-            ProbeSpec::Full(p) => Ok(p.clone()),
-        }
-    }
-}
-
-/// How the frequency plan is chosen.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(rename_all = "kebab-case")]
-pub enum NodePlan {
-    /// Fixed for each packet (same RF length and gain for every frame of a packet).
-    PerPacket,
-    /// MUST's rule, re-planned for every frame.
-    PerCall,
-}
-
-/// `simus` node parameters.
-#[derive(Clone, Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SimusNodeParams {
-    /// Probe preset or description (MUST names).
-    pub probe: ProbeSpec,
-    /// Speed of sound and attenuation.
-    pub medium: Medium,
-    /// SIMUS options (MUST `options`: dB threshold, fs, accuracy mode, …).
-    pub options: SimusOptions,
-    /// Plane-wave tilts (degrees): one RF frame per tilt for every snapshot.
-    pub tilts_deg: Vec<f64>,
-    /// Pulse repetition frequency written into the RF headers (Hz).
-    pub prf: f64,
-    /// Frequency plan mode.
-    pub plan: NodePlan,
-    /// Extra distance (m) the per-packet plan allows for scatterers moving during a packet.
-    pub plan_margin: f64,
-    /// Transmit apodisation: Tukey window over the elements with this taper fraction, in
-    /// [0, 1] (0 = rectangular, MUST's default; 1 = Hann). A taper weakens the edge waves of the
-    /// plane wave.
-    pub tx_tukey: f64,
-}
-
-impl Default for SimusNodeParams {
-    fn default() -> Self {
-        Self {
-            probe: ProbeSpec::Preset("paper-5mhz".into()),
-            medium: Medium::default(),
-            options: SimusOptions::default(),
-            tilts_deg: vec![0.0],
-            prf: 10e3,
-            plan: NodePlan::PerPacket,
-            plan_margin: 2e-3,
-            tx_tukey: 0.0,
-        }
-    }
-}
-
-struct Setup {
-    probe: Probe,
-    transmits: Vec<(f64, Transmit)>,
-}
-
-impl SimusNodeParams {
-    fn setup(&self) -> Result<Setup, String> {
-        let probe = self.probe.resolve().map_err(|e| format!("probe: {e}"))?;
-        probe.validate().map_err(|e| e.to_string())?;
-        self.medium.validate().map_err(|e| e.to_string())?;
-        self.options.validate(probe.fc).map_err(|e| e.to_string())?;
-        if probe.n_elements > MAX_TX_ELEMENTS {
-            return Err(format!(
-                "probe.n_elements = {} is out of range: 1 ..= {MAX_TX_ELEMENTS} (RF header delay table)",
-                probe.n_elements
-            ));
-        }
-        if self.tilts_deg.is_empty() || self.tilts_deg.len() > 64 {
-            return Err(format!("tilts_deg has {} entries: 1 ..= 64 allowed", self.tilts_deg.len()));
-        }
-        if !(self.tx_tukey.is_finite() && (0.0..=1.0).contains(&self.tx_tukey)) {
-            return Err(format!("tx_tukey = {} is out of range: 0 ..= 1", self.tx_tukey));
-        }
-        let mut transmits = Vec::new();
-        for (i, t) in self.tilts_deg.iter().enumerate() {
-            if !(t.is_finite() && t.abs() < 90.0) {
-                return Err(format!("tilts_deg[{i}] = {t} is out of range: (-90, 90) degrees"));
-            }
-            let mut tx = Transmit::plane_wave(&probe, self.medium.c, t.to_radians()).map_err(|e| e.to_string())?;
-            if self.tx_tukey > 0.0 {
-                tx.apodization = tukey(probe.n_elements, self.tx_tukey);
-            }
-            transmits.push((t.to_radians(), tx));
-        }
-        if !(self.prf.is_finite() && self.prf > 0.0 && self.prf <= 1e7) {
-            return Err(format!("prf = {} is out of range: (0, 1e7] Hz", self.prf));
-        }
-        if !(self.plan_margin.is_finite() && (0.0..=1.0).contains(&self.plan_margin)) {
-            return Err(format!("plan_margin = {} is out of range: 0 ..= 1 m", self.plan_margin));
-        }
-        Ok(Setup { probe, transmits })
-    }
-}
-
-/// Tukey window of `n` points with taper fraction `r` in (0, 1] (1 = Hann).
-pub fn tukey(n: usize, r: f64) -> Vec<f64> {
-    (0..n)
-        .map(|i| {
-            let u = if n > 1 { i as f64 / (n - 1) as f64 } else { 0.5 };
-            let d = u.min(1.0 - u);
-            if d >= r / 2.0 {
-                1.0
-            } else {
-                0.5 * (1.0 - (std::f64::consts::PI * 2.0 * d / r).cos())
-            }
-        })
-        .collect()
-}
-
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
-    parse_params::<SimusNodeParams>(v)?.setup().map(|_| ())
+    parse_params::<ScanParams>(v)?.scan(MAX_TX_ELEMENTS).map(|_| ())
 }
 
 pub fn run(mut kit: Kit) -> anyhow::Result<()> {
-    let p: SimusNodeParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
-    let Setup { probe, transmits } = p.setup().map_err(anyhow::Error::msg)?;
+    let p: ScanParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    let scan = p.scan(MAX_TX_ELEMENTS).map_err(anyhow::Error::msg)?;
+    let mut planner = FramePlanner::new(&p, &scan);
+    let Scan { probe, transmits } = scan;
     let mut simus = Simus::new(probe.clone(), p.medium.clone(), p.options.clone())?;
     let mut input = kit.input::<ParticleSnapshot>("particles")?;
     let mut out = kit.output::<RfFrame>("rf")?;
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_el = probe.n_elements;
-    let max_delay = transmits.iter().map(|(_, t)| t.max_delay()).fold(0.0, f64::max);
     let (mut xs, mut zs, mut rcs) = (Vec::new(), Vec::new(), Vec::new());
-    let mut plan: Option<FrequencyPlan> = None;
     let mut last_t = 0.0;
-    let (x_first, x_last) = (probe.element_x(0), probe.element_x(n_el - 1));
     for_each(&mut kit, &mut input, |kit, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
@@ -189,28 +53,14 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             rcs.push(q.amplitude);
         }
         let scat = sonoflow_simus::ScattererSlices { x: &xs, z: &zs, rc: &rcs };
-        let d = scat.max_element_distance(x_first, x_last);
-        let replan = match (&plan, p.plan) {
-            (None, _) | (_, NodePlan::PerCall) => true,
-            (Some(_), NodePlan::PerPacket) if h.frame_in_packet == 0 => true,
-            (Some(pl), NodePlan::PerPacket) => {
-                let needed = d + simus.pulse_duration() * p.medium.c;
-                if needed > pl.max_distance {
-                    eprintln!(
-                        "simus: scatterers moved beyond plan_margin within packet {} (frame {}): re-planning; raise plan_margin to keep one plan per packet",
-                        h.packet, h.frame_in_packet
-                    );
-                    true
-                } else {
-                    false
-                }
-            }
-        };
-        if replan {
-            let margin = if p.plan == NodePlan::PerPacket { p.plan_margin } else { 0.0 };
-            plan = Some(simus.plan_for_max_distance(d + margin, max_delay)?);
+        let choice = planner.plan(&simus, scat, h.frame_in_packet == 0)?;
+        if choice.replanned_in_packet {
+            eprintln!(
+                "simus: scatterers moved beyond plan_margin within packet {} (frame {}): re-planning; raise plan_margin to keep one plan per packet",
+                h.packet, h.frame_in_packet
+            );
         }
-        let Some(pl) = plan.clone() else { anyhow::bail!("no frequency plan") };
+        let pl = choice.plan;
         let plan_ns = process_cpu_ns() - t0;
         kit.stats.messages_in += 1;
         for (tx_id, (angle, tx)) in transmits.iter().enumerate() {
@@ -259,27 +109,17 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 
+    /// The RF header's delay table bounds the probe: a clear error naming the field.
     #[test]
-    fn tukey_window_is_flat_in_the_middle_and_tapers_to_zero() {
-        // r = 1: Hann, 0.5 (1 − cos 2πi/(n−1)); r = 0.5: flat over the middle half.
-        let n = 129;
-        let hann = tukey(n, 1.0);
-        for (i, w) in hann.iter().enumerate() {
-            let exact = 0.5 * (1.0 - (2.0 * std::f64::consts::PI * i as f64 / (n - 1) as f64).cos());
-            assert!((w - exact).abs() < 1e-12, "{i}: {w} vs {exact}");
-        }
-        let t = tukey(n, 0.5);
-        assert_eq!(t[0], 0.0);
-        assert!(t[32..=96].iter().all(|&w| w == 1.0));
-        assert!((t[16] - 0.5).abs() < 1e-12, "{}", t[16]);
-        assert!(t.iter().zip(t.iter().rev()).all(|(a, b)| (a - b).abs() < 1e-12));
-        // Out of range: a clear error naming the field.
-        let bad = serde_json::json!({ "tx_tukey": 1.5 });
-        let e = validate(&bad).unwrap_err();
-        assert!(e.contains("tx_tukey") && e.contains("0 ..= 1"), "{e}");
+    fn probes_beyond_the_header_delay_table_are_refused() {
+        let mut probe = serde_json::to_value(sonoflow_simus::Probe::paper_5mhz()).unwrap();
+        probe["n_elements"] = serde_json::json!(MAX_TX_ELEMENTS + 1);
+        let e = validate(&serde_json::json!({ "probe": probe })).unwrap_err();
+        assert!(e.contains("probe.n_elements") && e.contains("256"), "{e}");
         assert!(validate(&serde_json::json!({ "tx_tukey": 0.5 })).is_ok());
     }
 }
