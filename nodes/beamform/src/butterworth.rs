@@ -8,7 +8,7 @@
 //! `z = (4 + p)/(4 − p)` with N zeros at −1, gain `k = ω^N / Π(4 − p)`, then polynomial expansion.
 //! All arithmetic is f64.
 
-use rustfft::num_complex::Complex;
+use num_complex::Complex;
 
 /// Numerator `b` and denominator `a` (a\[0\] = 1) of an order-`order` digital Butterworth
 /// low-pass with normalised cut-off `wn` (1 = Nyquist), as `scipy.signal.butter(order, wn)`.

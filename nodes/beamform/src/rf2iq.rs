@@ -19,7 +19,7 @@
 //! (`iq[e·n_samples + k]`, the layout the DAS plan reads).
 
 use rayon::prelude::*;
-use rustfft::num_complex::Complex;
+use num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
 use crate::butterworth::{butter_lowpass, filtfilt_in_place, lfilter_zi};

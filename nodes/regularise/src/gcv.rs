@@ -1,7 +1,7 @@
 //! Average leverage, the bounds on S that it implies, and the bounded 1-D minimiser used for the
 //! generalised cross-validation (GCV) search (Garcia 2010 CSDA, §3.2 and eq. 12).
 
-use rustfft::num_complex::Complex;
+use num_complex::Complex;
 
 /// Average leverage bounds (MATLAB `hMin`, `hMax`): very weak smoothing has h → 1, very strong
 /// smoothing h → 0.

@@ -74,13 +74,13 @@ fn two_way_pulse_duration(model: &PulseModel) -> f64 {
     let nf = 1usize << p.min(26);
     let fmax = 1.0 / dt / 2.0;
     let n = 2 * (nf - 1);
-    let mut spectrum: Vec<realfft::num_complex::Complex<f64>> = (0..nf)
+    let mut spectrum: Vec<num_complex::Complex<f64>> = (0..nf)
         .map(|k| {
             // np.linspace(0, fmax, nf)
             let f = if k == nf - 1 { fmax } else { k as f64 * (fmax / (nf - 1) as f64) };
             let w = 2.0 * PI * f;
             let h = model.probe(w);
-            realfft::num_complex::Complex::new(0.0, model.pulse_im(w) * h * h)
+            num_complex::Complex::new(0.0, model.pulse_im(w) * h * h)
         })
         .collect();
     // irfft ignores the imaginary parts of the DC and Nyquist bins

@@ -10,8 +10,8 @@
 
 use std::sync::Arc;
 
+use num_complex::Complex;
 use rayon::prelude::*;
-use realfft::num_complex::Complex;
 use realfft::{ComplexToReal, RealFftPlanner};
 
 use crate::error::{Result, SimusError};

@@ -161,7 +161,7 @@ fn grazing(_: &Ctx) -> CaseResult {
 
 /// Squared envelope x² + H{x}² (Hilbert transform by FFT, zero-padded to 2n).
 fn envelope2(x: &[f32]) -> Result<Vec<f64>, String> {
-    use realfft::num_complex::Complex;
+    use num_complex::Complex;
     let n = 2 * x.len();
     let mut planner = realfft::RealFftPlanner::<f64>::new();
     let fwd = planner.plan_fft_forward(n);

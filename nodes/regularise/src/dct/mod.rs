@@ -27,7 +27,7 @@ mod simd;
 
 use std::sync::Arc;
 
-use rustfft::num_complex::Complex;
+use num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
 
 pub use nd::{DctN, DctNScratch};

@@ -126,7 +126,7 @@ pub fn scene_names() -> Vec<String> {
 
 /// Squared envelope `x² + H{x}²` of a real signal (Hilbert transform by FFT, zero-padded to 2n).
 pub fn envelope2(x: &[f32]) -> Vec<f64> {
-    use realfft::num_complex::Complex;
+    use num_complex::Complex;
     let n = 2 * x.len();
     let mut planner = realfft::RealFftPlanner::<f64>::new();
     let fwd = planner.plan_fft_forward(n);
