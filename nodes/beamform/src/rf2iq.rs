@@ -18,8 +18,8 @@
 //! Arithmetic is f64 (as PyMUST's complex128); the output is complex f32, element-major
 //! (`iq[e·n_samples + k]`, the layout the DAS plan reads).
 
-use rayon::prelude::*;
 use num_complex::Complex;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::butterworth::{butter_lowpass, filtfilt_in_place, lfilter_zi};

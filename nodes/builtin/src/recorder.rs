@@ -1,4 +1,5 @@
-//! `recorder` node: subscribes to topics of the graph and writes MCAP.
+//! `recorder` node: subscribes to topics of the graph and writes MCAP
+//! (`sonoflow_mcap_io::TopicRecorder`: channels, CDR, pictures, counters).
 //!
 //! Lossless by construction: inputs are lossless iceoryx2 subscribers, the receive loop copies
 //! each sample out of shared memory into the writer's bounded queue and blocks when the queue is
@@ -8,12 +9,11 @@
 //! metadata and are printed at the end.
 
 use serde::{Deserialize, Serialize};
-use sonoflow_mcap_io::{ChannelId, ChannelSpec, Compression, OutMessage, RecorderWriter, WriterOptions};
-use sonoflow_messages::{cdr, viz, MessageType};
+use sonoflow_mcap_io::{Compression, TopicCount, TopicRecorder, WriterOptions};
+use sonoflow_messages::MessageType;
 use sonoflow_node_kit::KindSpec;
 use sonoflow_node_kit::{in_range, parse_params};
 use sonoflow_node_kit::{select_loop, unix_ns, DynInput, Kit, SelectEnd, Step};
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -94,19 +94,10 @@ pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<RecorderParams>(v)?.validate()
 }
 
-/// Per-topic counters written into the file.
-#[derive(Clone, Debug, Default, Serialize)]
-struct TopicCount {
-    received: u64,
-    written: u64,
-    gaps: u64,
-    end_of_stream: bool,
-}
-
+/// A recorded input and its counters.
 struct Recorded {
     input: Box<dyn DynInput>,
-    raw: ChannelId,
-    viz: Option<ChannelId>,
+    index: usize,
     is_stats: bool,
     count: TopicCount,
 }
@@ -114,8 +105,7 @@ struct Recorded {
 pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: RecorderParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     p.validate().map_err(anyhow::Error::msg)?;
-    let out_dir = PathBuf::from(kit.cfg.out_dir.clone().unwrap_or_else(|| ".".into()));
-    let path = out_dir.join(&p.path);
+    let path = PathBuf::from(kit.cfg.out_dir.clone().unwrap_or_else(|| ".".into())).join(&p.path);
     let opts = WriterOptions {
         compression: p.compression,
         compression_level: p.compression_level,
@@ -124,12 +114,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         queue_bytes: (p.queue_mb * 1048576.0) as usize,
         ..WriterOptions::default()
     };
-    let mut writer = RecorderWriter::create(&path, opts)?;
-
-    let inputs_cfg = kit.cfg.inputs.clone();
-    let mut rec: Vec<Recorded> = Vec::new();
-    let mut stats_publishers = 0usize;
-    for (port, qos) in &inputs_cfg {
+    let mut file = TopicRecorder::create(&path, opts)?;
+    let (mut rec, mut stats_publishers) = (Vec::<Recorded>::new(), 0usize);
+    for (port, qos) in &kit.cfg.inputs.clone() {
         let is_stats = port == sonoflow_node_kit::STATS_TOPIC;
         if is_stats && !p.stats {
             continue;
@@ -137,167 +124,81 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         if is_stats {
             stats_publishers = qos.max_publishers;
         }
-        let kind = MessageType::from_name(&qos.message_type)
-            .ok_or_else(|| anyhow::anyhow!("unknown message type {}", qos.message_type))?;
-        let mut md = BTreeMap::new();
-        md.insert("sonoflow.kind".to_string(), kind.name().to_string());
-        md.insert("sonoflow.header_size".to_string(), kind.header_size().to_string());
-        md.insert("sonoflow.elem_size".to_string(), kind.elem_size().to_string());
-        let raw = writer.add_channel(ChannelSpec {
-            topic: qos.topic.clone(),
-            message_encoding: "cdr".into(),
-            schema_name: kind.schema_name(),
-            schema_encoding: "ros2msg".into(),
-            schema_data: kind.schema_text().into_bytes(),
-            metadata: md,
-        })?;
-        rec.push(Recorded { input: kit.dyn_input(qos)?, raw, viz: None, is_stats, count: TopicCount::default() });
+        let kind = MessageType::parse(&qos.message_type).map_err(anyhow::Error::msg)?;
+        let index = file.add_topic(&qos.topic, kind, p.viz && !is_stats)?;
+        rec.push(Recorded { input: kit.dyn_input(qos)?, index, is_stats, count: TopicCount::default() });
     }
     if let Some(lf) = &p.launch_file {
         match std::fs::read(lf) {
-            Ok(data) => writer.attach("launch.toml", "application/toml", data)?,
+            Ok(data) => file.attach("launch.toml", "application/toml", data)?,
             Err(e) => eprintln!("recorder: cannot attach launch file {lf}: {e}"),
         }
     }
-    let mut run_md = BTreeMap::new();
-    run_md.insert("run_id".to_string(), kit.cfg.run_id.clone());
-    run_md.insert("sonoflow_version".to_string(), env!("CARGO_PKG_VERSION").to_string());
-    run_md.insert("started_unix_ns".to_string(), unix_ns().to_string());
-    writer.metadata("run", run_md)?;
-
+    let run_md = [
+        ("run_id", kit.cfg.run_id.clone()),
+        ("sonoflow_version", env!("CARGO_PKG_VERSION").to_string()),
+        ("started_unix_ns", unix_ns().to_string()),
+    ];
+    file.metadata("run", run_md.into_iter().map(|(k, v)| (k.to_string(), v)).collect())?;
     {
         let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> =
             rec.iter_mut().map(|r| r.input.as_mut() as &mut dyn sonoflow_node_kit::Handshake).collect();
         kit.handshake(&mut hs)?;
     }
     println!("recorder: recording {} topic(s) to {}", rec.len(), path.display());
-
     let wakeups: Vec<_> = rec.iter().map(|r| r.input.wakeup()).collect();
     let mut stats_eos = 0usize;
-    let mut buf_viz_channels: BTreeMap<String, ChannelId> = BTreeMap::new();
     let end = select_loop(&mut kit, &wakeups, Duration::from_millis(500), |_| {
-        // Drain every input.
-        loop {
-            let mut any = false;
-            for r in rec.iter_mut() {
-                let kind = r.input.kind();
-                let topic = r.input.topic_name().to_string();
-                let raw = r.raw;
-                let want_viz = p.viz && !r.is_stats;
-                let mut viz_ch = r.viz;
-                let w = &mut writer;
-                let vc = &mut buf_viz_channels;
-                let got = r.input.receive_with(&mut |header, payload| {
-                    let log_time = unix_ns();
-                    let c: sonoflow_messages::MsgHeaderV1 =
-                        bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<sonoflow_messages::MsgHeaderV1>()]);
-                    let mut data = w.buffer(8 + header.len() + payload.len());
-                    cdr::encode_bytes_into(header, payload.len() / kind.elem_size().max(1), payload, &mut data);
-                    w.write(OutMessage {
-                        channel: raw,
-                        sequence: c.seq as u32,
-                        log_time,
-                        publish_time: c.t_pub_ns,
-                        data,
-                    })
-                    .map_err(|e| sonoflow_node_kit::KitError::Port { port: topic.clone(), detail: e.to_string() })?;
-                    if want_viz {
-                        if let Some(v) = viz::viz(kind, header, payload) {
-                            let ch = match viz_ch {
-                                Some(ch) => ch,
-                                None => {
-                                    let t = viz::viz_topic(&topic);
-                                    let ch =
-                                        w.add_channel(ChannelSpec {
-                                            topic: t.clone(),
-                                            message_encoding: v.message_encoding.clone(),
-                                            schema_name: v.schema_name.clone(),
-                                            schema_encoding: v.schema_encoding.clone(),
-                                            schema_data: v.schema_data.clone(),
-                                            metadata: BTreeMap::new(),
-                                        })
-                                        .map_err(|e| {
-                                            sonoflow_node_kit::KitError::Port { port: t.clone(), detail: e.to_string() }
-                                        })?;
-                                    vc.insert(t, ch);
-                                    viz_ch = Some(ch);
-                                    ch
-                                }
-                            };
-                            w.write(OutMessage {
-                                channel: ch,
-                                sequence: c.seq as u32,
-                                log_time,
-                                publish_time: c.t_pub_ns,
-                                data: v.data,
-                            })
-                            .map_err(|e| sonoflow_node_kit::KitError::Port {
-                                port: topic.clone(),
-                                detail: e.to_string(),
-                            })?;
-                        }
-                    }
-                    Ok(())
-                })?;
-                r.viz = viz_ch;
-                match got {
-                    None => {}
-                    Some(true) => {
-                        any = true;
-                        if r.is_stats {
-                            stats_eos += 1;
-                        }
-                    }
-                    Some(false) => {
-                        any = true;
-                        r.count.written += 1;
-                    }
-                }
-            }
-            if !any {
-                break;
-            }
-        }
+        while drain_once(&mut rec, &mut file, &mut stats_eos)? {}
         let data_done = rec.iter().filter(|r| !r.is_stats).all(|r| r.input.counters().2);
         Ok(if data_done && stats_eos >= stats_publishers { Step::Done } else { Step::Continue })
     })?;
-    let terminated = end == SelectEnd::Terminated;
-
-    // Counters into the file.
-    let mut complete = true;
-    let mut md = BTreeMap::new();
-    let mut summary = Vec::new();
     for r in rec.iter_mut() {
         let (received, gaps, eos) = r.input.counters();
-        r.count.received = received;
-        r.count.gaps = gaps;
-        r.count.end_of_stream = eos || (r.is_stats && stats_eos >= stats_publishers);
-        if !r.count.end_of_stream || gaps > 0 || r.count.written != received {
-            complete = false;
-        }
-        md.insert(r.input.topic_name().to_string(), serde_json::to_string(&r.count).unwrap_or_default());
-        summary.push(format!(
-            "{} {}/{}{}{}",
-            r.input.topic_name(),
-            r.count.written,
+        r.count = TopicCount {
             received,
-            if gaps > 0 { format!(" ({gaps} gaps)") } else { String::new() },
-            if r.count.end_of_stream { "" } else { " (no end of stream)" }
-        ));
+            gaps,
+            end_of_stream: eos || (r.is_stats && stats_eos >= stats_publishers),
+            ..r.count
+        };
     }
-    md.insert("complete".into(), complete.to_string());
-    md.insert("dropped".into(), "0".into());
-    md.insert("terminated_early".into(), terminated.to_string());
-    writer.metadata("recording_stats", md)?;
-    let ws = writer.finish()?;
+    let counts: Vec<TopicCount> = rec.iter().map(|r| r.count.clone()).collect();
+    let s = file.finish(&counts, end == SelectEnd::Terminated)?;
     println!(
-        "recorder: {} — {} MB written, complete = {complete}, dropped = 0; topics written/received: {}",
+        "recorder: {} — {} MB written, complete = {}, dropped = 0; topics written/received: {}",
         path.display(),
-        ws.file_bytes as f64 / 1e6,
-        summary.join(", ")
+        s.stats.file_bytes as f64 / 1e6,
+        s.complete,
+        s.topics.join(", ")
     );
-    kit.stats.messages_in = rec.iter().map(|r| r.count.received).sum();
-    kit.stats.bytes_out = ws.file_bytes;
+    kit.stats.messages_in = counts.iter().map(|c| c.received).sum();
+    kit.stats.bytes_out = s.stats.file_bytes;
     kit.finish()?;
     Ok(())
+}
+
+/// Receives at most one message from every input into the file; false when none had one.
+fn drain_once(rec: &mut [Recorded], file: &mut TopicRecorder, stats_eos: &mut usize) -> anyhow::Result<bool> {
+    let mut any = false;
+    for r in rec.iter_mut() {
+        let (index, topic) = (r.index, r.input.topic_name().to_string());
+        let got = r.input.receive_with(&mut |header, payload| {
+            file.write(index, header, payload, unix_ns())
+                .map_err(|e| sonoflow_node_kit::KitError::Port { port: topic.clone(), detail: e.to_string() })
+        })?;
+        match got {
+            None => {}
+            Some(true) => {
+                any = true;
+                if r.is_stats {
+                    *stats_eos += 1;
+                }
+            }
+            Some(false) => {
+                any = true;
+                r.count.written += 1;
+            }
+        }
+    }
+    Ok(any)
 }

@@ -83,6 +83,7 @@
 mod error;
 mod reader;
 mod recover;
+pub mod topics;
 mod writer;
 
 use std::{fmt, str::FromStr};
@@ -92,6 +93,7 @@ use serde::{Deserialize, Serialize};
 pub use error::McapIoError;
 pub use reader::{InMessage, McapReader, MessageIter, ReadOptions, TopicInfo};
 pub use recover::{recover, RecoverStats};
+pub use topics::{RecordingSummary, TopicCount, TopicRecorder};
 pub use writer::{ChannelId, ChannelSpec, OutMessage, RecorderWriter, WriterOptions, WriterStats};
 
 /// Chunk compression of a recording.
