@@ -164,15 +164,15 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             println!("removed the resources of {n} dead node(s)");
             Ok(0)
         }
-        Cmd::Simus(a) => sonoflow_tools::simus::run(&a),
-        Cmd::Smoothn(a) => sonoflow_tools::smoothn::run(&a),
-        Cmd::Sweep(a) => sonoflow_tools::sweep::run(&a, registry),
+        Cmd::Simus(a) => sonoflow_tools::simus::run_simus(&a),
+        Cmd::Smoothn(a) => sonoflow_tools::smoothn::run_smoothn(&a),
+        Cmd::Sweep(a) => sonoflow_tools::sweep::run_sweep(&a, registry),
         Cmd::Rf2iq(a) => sonoflow_tools::beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow_tools::beamform::run_das(&a),
         Cmd::Iq2doppler(a) => sonoflow_tools::beamform::run_iq2doppler(&a),
         Cmd::Stability(a) => sonoflow_stability::run(&a),
-        Cmd::Platelet { what } => sonoflow_tools::platelet::run(&what),
-        Cmd::Bench { what } => sonoflow_tools::bench::run(what, registry),
+        Cmd::Platelet { what } => sonoflow_tools::platelet::run_platelet(&what),
+        Cmd::Bench { what } => sonoflow_tools::bench::run_bench(what, registry),
         Cmd::BenchPeer(args) => sonoflow_tools::bench::run_peer(args),
     }
 }

@@ -15,4 +15,5 @@ pub mod report;
 pub mod supervise;
 
 pub use launch::{load, resolve, Overrides, ResolvedGraph};
-pub use supervise::{default_out_dir, new_run_id, run_graph, RunOptions, RunReport};
+pub use report::{NodeOutcome, RunReport};
+pub use supervise::{default_out_dir, new_run_id, run_graph, RunOptions};

@@ -5,10 +5,39 @@
 //! times always, drawn here; the evaluators' (colour Doppler, vectors, error histograms) listed
 //! in their `evaluation*.json`. report.md shows each with a caption.
 
-use crate::supervise::RunReport;
 use sonoflow_evaluate::figures;
+use sonoflow_node_kit::NodeStats;
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// Outcome of one node.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NodeOutcome {
+    pub name: String,
+    pub program: String,
+    pub exit: String,
+    pub ok: bool,
+    pub stats: Option<NodeStats>,
+    pub log: String,
+}
+
+/// Machine-readable run report (`report.json`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunReport {
+    pub graph: String,
+    pub run_id: String,
+    pub out_dir: String,
+    pub status: String,
+    pub wall_s: f64,
+    pub failures: Vec<String>,
+    pub warnings: Vec<String>,
+    pub recordings: Vec<String>,
+    pub shm_bytes: u64,
+    pub nodes: Vec<NodeOutcome>,
+    /// PNG figures in `figures/` (paths relative to the run folder): the stage times, and the
+    /// evaluator's when the graph has one. A figure that could not be drawn is a warning.
+    pub figures: Vec<sonoflow_evaluate::figures::Figure>,
+}
 
 /// The stage-time chart's rows: every node, compute CPU and wall time in seconds.
 pub fn stage_rows(r: &RunReport) -> Vec<figures::StageRow> {

@@ -6,6 +6,7 @@
 //! only after `graph.stop_grace_s` escalate to SIGKILL — reported as a failure.
 
 use crate::launch::{Program, ResolvedGraph};
+use crate::report::{NodeOutcome, RunReport};
 use crossbeam_channel::{unbounded, Receiver, RecvTimeoutError};
 use sonoflow_node_kit::{NodeConfig, NodeStats, NODE_CONFIG_ENV, PROGRESS_LINE_PREFIX, STATS_LINE_PREFIX};
 use std::io::{BufRead, BufReader, Write};
@@ -34,35 +35,6 @@ pub struct RunOptions {
     pub out_dir: PathBuf,
     pub run_id: String,
     pub quiet: bool,
-}
-
-/// Outcome of one node.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct NodeOutcome {
-    pub name: String,
-    pub program: String,
-    pub exit: String,
-    pub ok: bool,
-    pub stats: Option<NodeStats>,
-    pub log: String,
-}
-
-/// Machine-readable run report (`report.json`).
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct RunReport {
-    pub graph: String,
-    pub run_id: String,
-    pub out_dir: String,
-    pub status: String,
-    pub wall_s: f64,
-    pub failures: Vec<String>,
-    pub warnings: Vec<String>,
-    pub recordings: Vec<String>,
-    pub shm_bytes: u64,
-    pub nodes: Vec<NodeOutcome>,
-    /// PNG figures in `figures/` (paths relative to the run folder): the stage times, and the
-    /// evaluator's when the graph has one. A figure that could not be drawn is a warning.
-    pub figures: Vec<sonoflow_evaluate::figures::Figure>,
 }
 
 struct Running {

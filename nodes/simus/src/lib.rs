@@ -54,6 +54,7 @@ mod error;
 mod exact;
 pub mod grid;
 mod kernel;
+mod lanes;
 mod math;
 mod must;
 mod params;
@@ -62,7 +63,6 @@ mod probe;
 pub mod pulse;
 pub mod scan;
 mod scatterers;
-mod simd;
 mod simus;
 mod transmit;
 

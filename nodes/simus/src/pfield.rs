@@ -20,7 +20,7 @@
 // Lane loops index several arrays in lockstep: plain index loops keep them vectorisable.
 #![allow(clippy::needless_range_loop)]
 
-use crate::kernel::{L, V};
+use crate::lanes::{L, V};
 use crate::math::{exp_nonpos, sinc_eps, sincos_turns};
 use crate::probe::Baffle;
 
@@ -106,7 +106,7 @@ pub(crate) struct ScattererGeom<'a> {
 impl ArrayGeom {
     /// Fills one scatterer's geometry and steppers (`df` = frequency step). `silent` scatterers
     /// (padding) get amplitude 0. Branch-free inner loops: the compiler vectorises them in the
-    /// SIMD builds of [`crate::simd::Simd::setup`].
+    /// SIMD builds of [`crate::kernel::simd::Simd::setup`].
     #[inline(always)]
     pub fn scatterer(&self, x: f32, z: f32, df: f64, silent: bool, out: ScattererGeom<'_>) {
         let (x, z) = (f64::from(x), f64::from(z));

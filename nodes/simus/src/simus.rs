@@ -17,13 +17,13 @@ use realfft::{ComplexToReal, RealFftPlanner};
 use crate::error::{Result, SimusError};
 use crate::exact::{accumulate_exact, Tables64};
 use crate::grid::{FrequencyPlan, PlanInputs};
+use crate::kernel::simd::Simd;
 use crate::kernel::{Scratch, Tables, G, L, TX_COMPLEX, TX_REAL, TX_UNIT, V};
 use crate::params::{Accuracy, Medium, PlanMode, SimusOptions};
 use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
 use crate::probe::Probe;
 use crate::pulse::PulseModel;
 use crate::scatterers::ScattererSlices;
-use crate::simd::Simd;
 use crate::transmit::Transmit;
 
 /// RF of one transmit, element-major.

@@ -45,7 +45,7 @@ pub struct CheckpointHeader {
     /// dt of the first step (reference of the dt-collapse criterion).
     pub first_dt: Option<Real>,
     /// Report of the last step (its dt shapes the next steps towards an output time).
-    pub last_step: Option<crate::solver::StepReport>,
+    pub last_step: Option<crate::step::StepReport>,
     /// Mass bookkeeping per open boundary.
     pub fluxes: Vec<BoundaryFlux>,
     /// Parameters of the run that wrote it.

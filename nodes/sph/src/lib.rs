@@ -33,6 +33,7 @@ pub mod params;
 pub mod particles;
 pub mod setup;
 pub mod solver;
+mod step;
 pub mod walls;
 pub mod waveform;
 pub mod wcsph;

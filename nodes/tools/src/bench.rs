@@ -98,7 +98,7 @@ pub struct PeerResult {
 }
 
 /// `sonoflow bench …`; `registry`: the node kinds the recorder benchmark's graph uses.
-pub fn run(c: BenchCmd, registry: &'static [KindSpec]) -> anyhow::Result<i32> {
+pub fn run_bench(c: BenchCmd, registry: &'static [KindSpec]) -> anyhow::Result<i32> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let (table, out) = match c {
         BenchCmd::Transport { frames, mib, out } => (transport(frames, mib, &command)?, out),

@@ -167,7 +167,7 @@ impl MirrorUse {
     }
 }
 
-pub fn run(cmd: &PlateletCmd) -> anyhow::Result<i32> {
+pub fn run_platelet(cmd: &PlateletCmd) -> anyhow::Result<i32> {
     match cmd {
         PlateletCmd::Data(a) => data(a),
         PlateletCmd::Train(a) => train(a),

@@ -97,7 +97,7 @@ pub fn read_scatterers(path: &Path) -> anyhow::Result<Scatterers> {
 }
 
 /// Runs the batch tool.
-pub fn run(a: &SimusArgs) -> anyhow::Result<i32> {
+pub fn run_simus(a: &SimusArgs) -> anyhow::Result<i32> {
     let scat = read_scatterers(&a.scatterers)?;
     let p = Path::new(&a.param);
     let (probe, medium, mut transmit, fs) = if p.exists() {

@@ -189,7 +189,7 @@ fn run_divergence_free(a: &SmoothnArgs, weight_function: WeightFunction) -> anyh
     Ok(0)
 }
 
-pub fn run(a: &SmoothnArgs) -> anyhow::Result<i32> {
+pub fn run_smoothn(a: &SmoothnArgs) -> anyhow::Result<i32> {
     if a.divergence_free {
         let weight_function: WeightFunction =
             parse_enum("weight-function", &a.weight_function, "bisquare, cauchy, talworth")?;

@@ -168,7 +168,7 @@ fn xml(t: &str) -> String {
 }
 
 /// `sonoflow sweep`; `registry`: the node kinds the swept graph may use.
-pub fn run(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
+pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
     if a.field != "regularised" && a.field != "raw" {
         anyhow::bail!("--field {}: allowed regularised, raw", a.field);
     }

@@ -22,6 +22,7 @@ use crate::kernel::Kernel;
 use crate::neighbours::CellList;
 use crate::params::{Integrator, ParamError, SphParams};
 use crate::particles::{ParticleKind, Particles};
+pub use crate::step::{DtCriterion, StepReport};
 use crate::walls::{BuiltMotion, Domain, WallMotion};
 use crate::waveform::Waveform;
 use crate::wcsph::{compute_rates, Rate, Workspace};
@@ -31,21 +32,6 @@ mod corrections;
 
 /// Steps between two reorderings of the particle arrays by cell ([`Solver::reorder_by_cell`]).
 const REORDER_INTERVAL: u64 = 25;
-
-/// Which criterion set the time step.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum DtCriterion {
-    /// Acoustic CFL: C_cfl h / (c + |u|max).
-    Cfl,
-    /// Viscous diffusion: C_ν h² / ν.
-    Viscous,
-    /// Force: C_f √(h / |a|max).
-    Force,
-    /// `dt_max`.
-    Maximum,
-    /// Shortened to land exactly on a requested output time.
-    Output,
-}
 
 /// What went wrong in a blow-up.
 #[derive(Clone, Debug, PartialEq)]
@@ -114,19 +100,6 @@ pub enum SphError {
         /// What was detected.
         criterion: BlowUpCriterion,
     },
-}
-
-/// Diagnostics of the last step.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StepReport {
-    /// Time step taken \[s\].
-    pub dt: Real,
-    /// What limited it.
-    pub binding: DtCriterion,
-    /// max |ρ/ρ₀ − 1| over fluid particles after the step.
-    pub max_density_error: Real,
-    /// Steps taken since the start.
-    pub steps: u64,
 }
 
 /// State summary for monitoring (paper-independent acceptance signals, sph-validation.md §e).

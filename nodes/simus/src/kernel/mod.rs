@@ -14,18 +14,19 @@
 //! `U[k][·]` per group of [`G`] scatterers. Each phasor is loaded once per `NB` = 2 bins, and
 //! with 32 vector registers two chunks are processed together (4 independent recursion chains
 //! for M = 2, as the complex multiply's 7-cycle latency needs ≥ 4 chains in flight). The
-//! generic code is instantiated for the vector types of [`crate::simd`].
+//! generic code is instantiated for the vector types of [`simd`].
 
 // Lane loops index several arrays in lockstep: plain index loops keep them vectorisable.
 #![allow(clippy::needless_range_loop)]
 
 use std::ops::Range;
 
+pub(crate) use crate::lanes::{L, V};
 use crate::pfield::{ArrayGeom, BlockGeom};
-use crate::simd::Lanes;
+use simd::Lanes;
 
-/// SIMD lanes (elements per vector).
-pub(crate) const L: usize = 16;
+pub(crate) mod simd;
+
 /// Scatterers per receive group.
 pub(crate) const G: usize = 4;
 /// Bins per pass over the phasors.
@@ -39,11 +40,6 @@ pub(crate) const TX_COMPLEX: u8 = 0;
 pub(crate) const TX_REAL: u8 = 1;
 /// No delays and unit weights (padding lanes still 0: their phasors are 0).
 pub(crate) const TX_UNIT: u8 = 2;
-
-/// One vector of 16 lanes, 64-byte aligned.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[repr(C, align(64))]
-pub(crate) struct V(pub [f32; L]);
 
 /// Per-bin transmit tables of one call: `D_e(k)` in f32, `[bin][chunk]`, and the frequencies.
 #[derive(Clone, Debug, Default)]
