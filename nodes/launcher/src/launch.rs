@@ -739,7 +739,7 @@ kind = "recorder"
         Ok(())
     }
     fn positive_params(v: &serde_json::Value) -> Result<(), String> {
-        for (k, x) in v.as_object().into_iter().flatten() {
+        for (k, x) in v.as_object().into_iter().flatten().filter(|(k, _)| *k != "table") {
             match x.as_f64() {
                 Some(f) if f.is_finite() && f > 0.0 => {}
                 _ => return Err(format!("{k} = {x} is out of range: > 0")),
@@ -838,5 +838,41 @@ kind = "recorder"
         })
         .unwrap_err();
         assert_eq!(errs.len(), 4, "{errs:#?}");
+    }
+
+    /// Input files: a relative path in the launch file resolves against the file's folder (not
+    /// the working directory), one given with `--set` against the working directory; a missing
+    /// one is an error naming the parameter and the rule before anything starts (a warning when
+    /// lenient, as `sonoflow check` of a scene whose data are made later).
+    #[test]
+    fn input_files_resolve_against_the_launch_folder_and_missing_ones_are_reported() {
+        let scene = tempfile::tempdir().unwrap();
+        std::fs::create_dir(scene.path().join("data")).unwrap();
+        std::fs::write(scene.path().join("data/t.csv"), "1,2\n").unwrap();
+        let with_table =
+            |t: &str| G.replace("params = { gain = 3.0 }", &format!("params = {{ gain = 3.0, table = \"{t}\" }}"));
+        let resolve_in =
+            |text: &str, ov: &Overrides| resolve(toml::from_str(text).unwrap(), scene.path(), ov, REGISTRY);
+        let g = resolve_in(&with_table("data/t.csv"), &Overrides::default()).unwrap();
+        let stage = g.nodes.iter().find(|n| n.name == "stage").unwrap();
+        let got = PathBuf::from(stage.params["table"].as_str().unwrap());
+        assert!(got.is_absolute(), "{got:?}");
+        assert_eq!(got.canonicalize().unwrap(), scene.path().join("data/t.csv").canonicalize().unwrap());
+        // Missing: an error naming the parameter, the full path and the rule.
+        let errs = resolve_in(&with_table("data/none.csv"), &Overrides::default()).unwrap_err();
+        assert_eq!(errs.len(), 1, "{errs:?}");
+        assert!(errs[0].contains("nodes.stage.params.table") && errs[0].contains("none.csv"), "{errs:?}");
+        assert!(errs[0].contains("resolve against its folder"), "{errs:?}");
+        let g =
+            resolve_in(&with_table("data/none.csv"), &Overrides { lenient_files: true, ..Default::default() }).unwrap();
+        assert!(g.warnings.iter().any(|w| w.contains("nodes.stage.params.table")), "{:?}", g.warnings);
+        // --set: relative to the working directory (the scene folder's file is not found from
+        // there, and the error says which rule applied).
+        let ov = Overrides { set: vec!["stage.table=\"data/t.csv\"".into()], ..Default::default() };
+        let errs = resolve_in(G, &ov).unwrap_err();
+        assert!(errs.iter().any(|e| e.contains("--set") && e.contains("working directory")), "{errs:?}");
+        let abs = scene.path().join("data/t.csv");
+        let ov = Overrides { set: vec![format!("stage.table=\"{}\"", abs.display())], ..Default::default() };
+        resolve_in(G, &ov).unwrap();
     }
 }
