@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Reads a sonoflow MCAP recording with the PyPI `mcap` package and decodes one raw RF frame
-with numpy alone (fixed offsets documented in README.md, "Reading recordings from Python").
+with numpy alone (fixed offsets documented in docs/recording.md, "Reading recordings from Python").
 
 usage: read_recording.py RECORDING.mcap EXPECT.json
 EXPECT.json: {"topic", "frame_id", "n_channels", "n_samples", "fs", "values": [[ch, k, v], ...],
