@@ -11,17 +11,13 @@ use sonoflow_node_kit::{port, KindSpec};
 use sonoflow_node_kit::{thread_cpu_ns, Kit};
 
 /// The `analytic-flow` node kind.
-pub const SPEC: KindSpec = KindSpec {
-        name: "analytic-flow",
-        about: "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk, plug band) at the acquisition times, plus the exact field as ground truth",
-        ports: &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
-        validate,
-        check_wiring: None,
-        input_files: &[],
-        run,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "analytic-flow",
+    "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk, plug band) at the acquisition times, plus the exact field as ground truth",
+    &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
+    validate,
+    run,
+);
 
 /// Default ground-truth grid: 20 mm × 20 mm from 10 mm depth, 0.25 mm spacing.
 pub fn default_truth_grid() -> GridSpec {

@@ -17,17 +17,13 @@ use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
 
 /// The `beamformer` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "beamformer",
-    about: "RF → I/Q (MUST rf2iq) → delay-and-sum on a grid, one I/Q image per receive sub-aperture angle",
-    ports: &[port("rf", In, RfFrameV2, true), port("iq", Out, IqFrameV2, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
+pub const SPEC: KindSpec = KindSpec::new(
+    "beamformer",
+    "RF → I/Q (MUST rf2iq) → delay-and-sum on a grid, one I/Q image per receive sub-aperture angle",
+    &[port("rf", In, RfFrameV2, true), port("iq", Out, IqFrameV2, true)],
     validate,
-    check_wiring: None,
-    input_files: &[],
     run,
-};
+);
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<BeamformerParams>(v)?.validate()

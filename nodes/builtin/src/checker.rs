@@ -11,17 +11,13 @@ use sonoflow_node_kit::{parse_params, thread_cpu_ns, Kit};
 use sonoflow_node_kit::{port, KindSpec};
 
 /// The `checker` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "checker",
-    about: "verifies test-source frames (× gain) bit for bit and writes <node>.json in the run folder",
-    ports: &[port("rf", In, RfFrameV2, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
-    validate: validate_checker,
-    check_wiring: None,
-    input_files: &[],
-    run: run_checker,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "checker",
+    "verifies test-source frames (× gain) bit for bit and writes <node>.json in the run folder",
+    &[port("rf", In, RfFrameV2, true)],
+    validate_checker,
+    run_checker,
+);
 
 /// `checker` parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]

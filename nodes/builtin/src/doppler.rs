@@ -18,21 +18,17 @@ use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
 
 /// The `doppler` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "doppler",
-    about: "colour + vector Doppler per packet: lag-L slow-time autocorrelation (eq. 19) or Loupas per look, fc²-weighted least-squares (vx, vz) through each look's receive aperture",
-    ports: &[
+pub const SPEC: KindSpec = KindSpec::new(
+    "doppler",
+    "colour + vector Doppler per packet: lag-L slow-time autocorrelation (eq. 19) or Loupas per look, fc²-weighted least-squares (vx, vz) through each look's receive aperture",
+    &[
         port("iq", In, IqFrameV2, true),
         port("vector", Out, VectorFieldV1, true),
         port("maps", Out, DopplerMapV1, false),
     ],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
     validate,
-    check_wiring: None,
-    input_files: &[],
     run,
-};
+);
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<PacketParams>(v)?.validate().map_err(|e| e.to_string())

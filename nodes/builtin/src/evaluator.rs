@@ -23,22 +23,18 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 /// The `evaluator` node kind.
-pub const SPEC: KindSpec = KindSpec {
-        name: "evaluator",
-        about: "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md, the run report and its figures (with `maps`: colour Doppler)",
-        ports: &[
+pub const SPEC: KindSpec = KindSpec::new(
+    "evaluator",
+    "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md, the run report and its figures (with `maps`: colour Doppler)",
+    &[
             port("truth", In, VectorFieldV1, true),
             port("raw", In, VectorFieldV1, false),
             port("regularised", In, VectorFieldV1, false),
             port("maps", In, DopplerMapV1, false),
         ],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
-        validate,
-        check_wiring: None,
-        input_files: &[],
-        run,
-};
+    validate,
+    run,
+);
 
 fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<EvaluatorParams>(v)?.validate()

@@ -8,17 +8,13 @@ use sonoflow_node_kit::{for_each, in_range, parse_params, thread_cpu_ns, Flow, K
 use sonoflow_node_kit::{port, KindSpec};
 
 /// The `field-noise` node kind.
-pub const SPEC: KindSpec = KindSpec {
-        name: "field-noise",
-        about: "adds Gaussian noise, gross outliers and missing pixels to vector fields (deterministic; exercises the regulariser)",
-        ports: &[port("clean", In, VectorFieldV1, true), port("noisy", Out, VectorFieldV1, true)],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
-        validate: validate_field_noise,
-        check_wiring: None,
-        input_files: &[],
-        run: run_field_noise,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "field-noise",
+    "adds Gaussian noise, gross outliers and missing pixels to vector fields (deterministic; exercises the regulariser)",
+    &[port("clean", In, VectorFieldV1, true), port("noisy", Out, VectorFieldV1, true)],
+    validate_field_noise,
+    run_field_noise,
+);
 
 /// `field-noise` parameters: corrupts vector fields the way a vector Doppler estimator does
 /// (speckle noise, gross outliers, missing pixels), to exercise the regulariser.

@@ -10,17 +10,13 @@ use sonoflow_node_kit::{parse_params, thread_cpu_ns, Kit};
 use sonoflow_node_kit::{port, KindSpec};
 
 /// The `gain` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "gain",
-    about: "multiplies RF frames by a constant (a minimal processing stage)",
-    ports: &[port("rf_in", In, RfFrameV2, true), port("rf_out", Out, RfFrameV2, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
-    validate: validate_gain,
-    check_wiring: None,
-    input_files: &[],
-    run: run_gain,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "gain",
+    "multiplies RF frames by a constant (a minimal processing stage)",
+    &[port("rf_in", In, RfFrameV2, true), port("rf_out", Out, RfFrameV2, true)],
+    validate_gain,
+    run_gain,
+);
 
 /// `gain` parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]

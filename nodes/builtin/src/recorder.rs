@@ -18,17 +18,14 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// The `recorder` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "recorder",
-    about: "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
-    ports: &[],
-    dynamic_inputs: true,
-    dynamic_outputs: false,
+pub const SPEC: KindSpec = KindSpec::new(
+    "recorder",
+    "records topics to MCAP (lossless, chunk-compressed, Foxglove pictures)",
+    &[],
     validate,
-    check_wiring: None,
-    input_files: &[],
     run,
-};
+)
+.with_dynamic_ports(true, false);
 
 /// Recorder parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]

@@ -17,17 +17,15 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// The `replay` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "replay",
-    about: "publishes the topics of an MCAP recording into the graph (outputs: recorded topic = graph topic)",
-    ports: &[],
-    dynamic_inputs: false,
-    dynamic_outputs: true,
+pub const SPEC: KindSpec = KindSpec::new(
+    "replay",
+    "publishes the topics of an MCAP recording into the graph (outputs: recorded topic = graph topic)",
+    &[],
     validate,
-    check_wiring: None,
-    input_files: &["path"],
     run,
-};
+)
+.with_input_files(&["path"])
+.with_dynamic_ports(false, true);
 
 /// Replay parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]

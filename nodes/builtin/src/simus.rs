@@ -13,17 +13,13 @@ use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, Kind
 use sonoflow_simus::{FramePlanner, Scan, ScanParams, Simus, SimusError};
 
 /// The `simus` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "simus",
-    about: "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
-    ports: &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV2, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
+pub const SPEC: KindSpec = KindSpec::new(
+    "simus",
+    "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
+    &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV2, true)],
     validate,
-    check_wiring: None,
-    input_files: &[],
     run,
-};
+);
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<ScanParams>(v)?.scan(MAX_TX_ELEMENTS).map(|_| ())

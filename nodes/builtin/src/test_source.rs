@@ -10,17 +10,13 @@ use sonoflow_node_kit::{in_range, parse_params, thread_cpu_ns, Kit};
 use sonoflow_node_kit::{port, KindSpec};
 
 /// The `test-source` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "test-source",
-    about: "deterministic RF test frames (pattern from seed and sequence number)",
-    ports: &[port("rf", Out, RfFrameV2, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
-    validate: validate_source,
-    check_wiring: None,
-    input_files: &[],
-    run: run_source,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "test-source",
+    "deterministic RF test frames (pattern from seed and sequence number)",
+    &[port("rf", Out, RfFrameV2, true)],
+    validate_source,
+    run_source,
+);
 
 /// Deterministic test value of sample `i` of frame `frame` (uniform in [-0.5, 0.5)).
 pub fn pattern(seed: u64, frame: u64, i: u64) -> f32 {

@@ -54,7 +54,7 @@ pub struct KindSpec {
     /// Outputs named after recorded topics (a replay node).
     pub dynamic_outputs: bool,
     /// Checks the `[params]` table (deserialise + validate); the error names the field.
-    pub validate: fn(&serde_json::Value) -> Result<(), String>,
+    pub validate: ParamCheck,
     /// Checks between the parameters and the wired inputs that `validate` cannot make
     /// (arguments: params, names of the wired input ports).
     pub check_wiring: Option<WiringCheck>,
@@ -63,10 +63,56 @@ pub struct KindSpec {
     /// missing or unreadable file before anything starts.
     pub input_files: &'static [&'static str],
     /// Runs the node.
-    pub run: fn(Kit) -> anyhow::Result<()>,
+    pub run: RunFn,
 }
 
+/// `validate` of a kind.
+pub type ParamCheck = fn(&serde_json::Value) -> Result<(), String>;
+/// `run` of a kind.
+pub type RunFn = fn(Kit) -> anyhow::Result<()>;
+
 impl KindSpec {
+    /// A kind with fixed ports, no wiring check and no input files (add them with
+    /// [`KindSpec::with_input_files`], [`KindSpec::with_wiring_check`], [`KindSpec::with_dynamic_ports`]).
+    pub const fn new(
+        name: &'static str,
+        about: &'static str,
+        ports: &'static [PortSpec],
+        validate: ParamCheck,
+        run: RunFn,
+    ) -> Self {
+        Self {
+            name,
+            about,
+            ports,
+            dynamic_inputs: false,
+            dynamic_outputs: false,
+            validate,
+            check_wiring: None,
+            input_files: &[],
+            run,
+        }
+    }
+
+    /// The same kind reading the files named by these params.
+    pub const fn with_input_files(mut self, input_files: &'static [&'static str]) -> Self {
+        self.input_files = input_files;
+        self
+    }
+
+    /// The same kind with a params-against-wiring check.
+    pub const fn with_wiring_check(mut self, check: WiringCheck) -> Self {
+        self.check_wiring = Some(check);
+        self
+    }
+
+    /// The same kind with inputs and/or outputs named after topics.
+    pub const fn with_dynamic_ports(mut self, inputs: bool, outputs: bool) -> Self {
+        self.dynamic_inputs = inputs;
+        self.dynamic_outputs = outputs;
+        self
+    }
+
     /// The port `name` of direction `dir`.
     pub fn port(&self, name: &str, dir: PortDir) -> Option<&PortSpec> {
         self.ports.iter().find(|p| p.name == name && p.dir == dir)
