@@ -22,10 +22,11 @@ pub mod receive;
 pub mod spec;
 
 pub use config::{NodeConfig, TopicQos, NODE_CONFIG_ENV};
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::port::{listener::Listener, notifier::Notifier};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 pub use receive::{for_each, select_loop, Flow, SelectEnd, Step, Wakeup};
@@ -503,10 +504,14 @@ impl<M: WireMessage> Input<M> {
         Ok(s)
     }
 
-    /// Blocks until a notification arrives on this input or `timeout` passes.
+    /// Blocks until a notification arrives on this input, `timeout` passes, or a signal
+    /// interrupts the wait. Callers loop and check [`Kit::check_termination`]: a SIGTERM
+    /// during the wait is reported there as [`KitError::Terminated`], not as a transport error.
     pub fn wait(&self, timeout: Duration) -> Result<(), KitError> {
-        self.listener.timed_wait(|_| {}, timeout).map_err(ipc(format!("waiting on `{}`", self.services.qos.topic)))?;
-        Ok(())
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(e) => Err(ipc(format!("waiting on `{}`", self.services.qos.topic))(e)),
+        }
     }
 
     /// The event this input's messages raise (for [`select_loop`] over several inputs).
@@ -593,7 +598,13 @@ impl Kit {
             None => None,
         };
         let stats = NodeStats { node: cfg.node_name.clone(), kind: cfg.kind.clone(), ..Default::default() };
-        Ok(Self { node, cfg, stats_out, started: Instant::now(), stats })
+        let kit = Self { node, cfg, stats_out, started: Instant::now(), stats };
+        // iceoryx2 installs its SIGINT/SIGTERM handlers lazily, at the first termination check.
+        // Check once now, so a signal that arrives before the node's first wait (a long set-up,
+        // a handshake that completed at once) becomes `Terminated` at the next check instead of
+        // killing the process without end of stream or statistics.
+        kit.check_termination()?;
+        Ok(kit)
     }
 
     /// Deserialises the node's `[params]` into `P` (unknown keys rejected by `P`'s serde attributes).
@@ -650,6 +661,11 @@ impl Kit {
                 for p in ports.iter_mut() {
                     if !p.step()? {
                         missing.push(p.describe());
+                    }
+                }
+                if let Some(s) = self.stats_out.as_mut() {
+                    if !s.step()? {
+                        missing.push(s.describe());
                     }
                 }
                 return Err(KitError::Timeout { what: missing.join(", "), seconds: self.cfg.handshake_timeout_s });

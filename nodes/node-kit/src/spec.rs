@@ -151,3 +151,133 @@ pub fn in_range<T: PartialOrd + std::fmt::Display>(field: &str, v: T, lo: T, hi:
         Err(format!("{field} = {v} is out of range: {lo} ..= {hi}"))
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+    use serde_json::json;
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields)]
+    struct Grid {
+        nx: u32,
+        #[serde(default)]
+        dx: f64,
+    }
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields)]
+    struct Params {
+        grid: Grid,
+        #[serde(default = "two")]
+        gain: f32,
+        #[serde(default)]
+        layers: Vec<Grid>,
+    }
+
+    fn two() -> f32 {
+        2.0
+    }
+
+    #[test]
+    fn parse_params_reads_values_and_defaults() {
+        let p: Params = parse_params(&json!({ "grid": { "nx": 64, "dx": 0.5 } })).unwrap();
+        assert_eq!(p, Params { grid: Grid { nx: 64, dx: 0.5 }, gain: 2.0, layers: vec![] });
+    }
+
+    #[test]
+    fn parse_params_errors_name_the_field() {
+        let e = parse_params::<Params>(&json!({ "grid": { "nx": "many" } })).unwrap_err();
+        assert!(e.starts_with("grid.nx: invalid type: string \"many\""), "{e}");
+
+        let e = parse_params::<Params>(&json!({ "grid": { "nx": 1 }, "gain": true })).unwrap_err();
+        assert!(e.starts_with("gain: invalid type: boolean"), "{e}");
+
+        let e =
+            parse_params::<Params>(&json!({ "grid": { "nx": 1 }, "layers": [{ "nx": 1 }, { "nx": -3 }] })).unwrap_err();
+        assert!(e.starts_with("layers[1].nx: invalid value: integer `-3`"), "{e}");
+
+        let e = parse_params::<Params>(&json!({ "grid": { "nx": 1, "ny": 2 } })).unwrap_err();
+        assert!(e.contains("unknown field `ny`"), "{e}");
+        assert!(e.starts_with("grid"), "the path to the unknown key: {e}");
+
+        let e = parse_params::<Params>(&json!({ "grid": { "nx": 1 }, "gian": 2.0 })).unwrap_err();
+        assert!(e.contains("unknown field `gian`, expected one of `grid`, `gain`, `layers`"), "{e}");
+
+        let e = parse_params::<Params>(&json!({ "grid": { "dx": 1.0 } })).unwrap_err();
+        assert!(e.starts_with("grid: missing field `nx`"), "{e}");
+    }
+
+    #[test]
+    fn parse_params_null_is_an_empty_table() {
+        #[derive(Debug, Deserialize, PartialEq, Default)]
+        #[serde(deny_unknown_fields, default)]
+        struct AllDefault {
+            gain: f32,
+        }
+        assert_eq!(parse_params::<AllDefault>(&serde_json::Value::Null).unwrap(), AllDefault::default());
+        // A required field is still required when the table is absent: the message names it.
+        let e = parse_params::<Params>(&serde_json::Value::Null).unwrap_err();
+        assert_eq!(e, "missing field `grid`");
+        // Not a table at all.
+        let e = parse_params::<Params>(&json!("gain = 2")).unwrap_err();
+        assert!(e.starts_with("invalid type: string \"gain = 2\", expected struct Params"), "{e}");
+    }
+
+    #[test]
+    fn in_range_is_inclusive_and_names_the_field() {
+        assert_eq!(in_range("depth", 1, 1, 8), Ok(()));
+        assert_eq!(in_range("depth", 8, 1, 8), Ok(()));
+        assert_eq!(in_range("depth", 9, 1, 8), Err("depth = 9 is out of range: 1 ..= 8".to_string()));
+        assert_eq!(in_range("depth", 0, 1, 8), Err("depth = 0 is out of range: 1 ..= 8".to_string()));
+        assert_eq!(in_range("grid.dx", -0.5, 0.0, 1.0), Err("grid.dx = -0.5 is out of range: 0 ..= 1".to_string()));
+        // NaN is never in range.
+        assert_eq!(
+            in_range("gain", f64::NAN, -1e30, 1e30),
+            Err("gain = NaN is out of range: -1000000000000000000000000000000 ..= 1000000000000000000000000000000"
+                .to_string())
+        );
+    }
+
+    fn run(_: Kit) -> anyhow::Result<()> {
+        Ok(())
+    }
+
+    fn validate(v: &serde_json::Value) -> Result<(), String> {
+        parse_params::<Params>(v).map(|_| ())
+    }
+
+    const SPEC: KindSpec = KindSpec {
+        name: "test",
+        about: "a test kind",
+        ports: &[
+            port("rf_in", PortDir::In, MessageType::RfFrameV1, true),
+            port("iq_in", PortDir::In, MessageType::IqFrameV1, false),
+            port("rf_in", PortDir::Out, MessageType::RfFrameV1, true),
+        ],
+        dynamic_inputs: false,
+        dynamic_outputs: false,
+        validate,
+        check_wiring: None,
+        input_files: &[],
+        run,
+    };
+
+    #[test]
+    fn kind_spec_finds_ports_by_name_and_direction() {
+        let p = SPEC.port("rf_in", PortDir::In).unwrap();
+        assert_eq!((p.message_type, p.required), (MessageType::RfFrameV1, true));
+        assert_eq!(SPEC.port("iq_in", PortDir::In).map(|p| p.required), Some(false));
+        assert_eq!(SPEC.port("rf_in", PortDir::Out).map(|p| p.dir), Some(PortDir::Out));
+        assert!(SPEC.port("iq_in", PortDir::Out).is_none());
+        assert_eq!(SPEC.port_names(PortDir::In), ["rf_in", "iq_in"]);
+        assert_eq!(SPEC.port_names(PortDir::Out), ["rf_in"]);
+        let none = KindSpec { ports: &[], ..SPEC };
+        assert_eq!(none.port_names(PortDir::Out), ["none"]);
+        assert_eq!((PortDir::In.word(), PortDir::Out.word()), ("input", "output"));
+        assert!((SPEC.validate)(&json!({ "grid": { "nx": 1 } })).is_ok());
+        assert!((SPEC.validate)(&json!({})).unwrap_err().contains("grid"));
+    }
+}
