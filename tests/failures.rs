@@ -198,3 +198,33 @@ fn ctrl_c_stops_the_graph_and_finishes_the_recording() {
     assert_eq!(report["status"], "interrupted");
     assert!(report["failures"].as_array().unwrap().is_empty(), "{report}");
 }
+
+/// A recording of a retired wire version (here an `rf` channel of schema RfFrameV1, as an older
+/// sonoflow wrote it) is refused by `replay` with an error naming the version and its
+/// replacement, not replayed as garbage.
+#[test]
+fn replay_refuses_a_retired_wire_version_naming_it() {
+    use sonoflow_mcap_io::{ChannelSpec, OutMessage, RecorderWriter, WriterOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("old.mcap");
+    let w = RecorderWriter::create(&rec, WriterOptions::default()).unwrap();
+    let mut w = w;
+    let ch = w
+        .add_channel(ChannelSpec {
+            topic: "rf".into(),
+            message_encoding: "cdr".into(),
+            schema_name: "sonoflow_msgs/msg/RfFrameV1".into(),
+            schema_encoding: "ros2msg".into(),
+            schema_data: b"sonoflow_msgs/RfFrameHeaderV1 header\nfloat32[] data\n".to_vec(),
+            metadata: Default::default(),
+        })
+        .unwrap();
+    w.write(OutMessage { channel: ch, sequence: 0, log_time: 1, publish_time: 1, data: vec![0, 1, 0, 0] }).unwrap();
+    w.finish().unwrap();
+    let out_dir = dir.path().join("run");
+    let set = format!("replay.path={:?}", rec.display().to_string());
+    let out = run_graph("tests/launch/replay.toml", &out_dir, &["--set", &set]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_ne!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("RfFrameV1") && err.contains("retired") && err.contains("RfFrameV2"), "{err}");
+}
