@@ -105,9 +105,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
         })?;
         let compute = thread_cpu_ns() - t0;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (n * 32) as u64;
-        kit.record(at.frame_id, at.t, compute)?;
+        kit.published((n * 32) as u64, at.frame_id, at.t, compute)?;
         last_t = at.t;
 
         let packet_done = at.frame_in_packet + 1 == params.schedule.packet_size;

@@ -104,9 +104,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                     d.write(Complex32 { re: s.re, im: s.im });
                 }
             })?;
-            kit.stats.messages_out += 1;
-            kit.stats.bytes_out += (img.len() * 8) as u64;
-            kit.record(ih.common.frame_id, ih.common.t_valid, compute)?;
+            kit.published((img.len() * 8) as u64, ih.common.frame_id, ih.common.t_valid, compute)?;
         }
         last_t = h.common.t_valid;
         Ok(Flow::Continue)

@@ -132,9 +132,7 @@ pub fn run_field_noise(mut kit: Kit) -> anyhow::Result<()> {
         oh.common.compute_ns = compute;
         out.publish_copy(oh, &buf)?;
         kit.stats.messages_in += 1;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (buf.len() * 4) as u64;
-        kit.record(oh.common.frame_id, oh.common.t_valid, compute)?;
+        kit.published((buf.len() * 4) as u64, oh.common.frame_id, oh.common.t_valid, compute)?;
         last_t = oh.common.t_valid;
         Ok(Flow::Continue)
     })?;

@@ -65,9 +65,7 @@ pub fn run_gain(mut kit: Kit) -> anyhow::Result<()> {
         })?;
         let compute = thread_cpu_ns() - t0;
         kit.stats.messages_in += 1;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (src.len() * 4) as u64;
-        kit.record(h.common.frame_id, h.common.t_valid, compute)?;
+        kit.published((src.len() * 4) as u64, h.common.frame_id, h.common.t_valid, compute)?;
         Ok(Flow::Continue)
     })?;
     out.publish_eos(last_t)?;

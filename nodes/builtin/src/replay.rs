@@ -148,9 +148,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             out.publish_bytes(header, payload, flags)?;
             last_t = c.t_valid;
             sent += 1;
-            kit.stats.messages_out += 1;
-            kit.stats.bytes_out += payload.len() as u64;
-            kit.record(c.frame_id, c.t_valid, thread_cpu_ns() - t0)?;
+            kit.published(payload.len() as u64, c.frame_id, c.t_valid, thread_cpu_ns() - t0)?;
             if total > 0 && sent.is_multiple_of((total / 20).max(1)) {
                 kit.progress(sent, total * p.loops.max(1) as u64);
             }

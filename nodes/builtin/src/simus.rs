@@ -91,9 +91,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             })?;
             r?;
             let compute = process_cpu_ns() - t1 + if tx_id == 0 { plan_ns } else { 0 };
-            kit.stats.messages_out += 1;
-            kit.stats.bytes_out += (n * 4) as u64;
-            kit.record(rh.common.frame_id, h.common.t_valid, compute)?;
+            kit.published((n * 4) as u64, rh.common.frame_id, h.common.t_valid, compute)?;
         }
         last_t = h.common.t_valid;
         Ok(Flow::Continue)

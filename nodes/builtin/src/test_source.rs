@@ -109,9 +109,7 @@ pub fn run_source(mut kit: Kit) -> anyhow::Result<()> {
             }
         })?;
         let compute = thread_cpu_ns() - t0;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (n * 4) as u64;
-        kit.record(frame, frame as f64 / p.prf, compute)?;
+        kit.published((n * 4) as u64, frame, frame as f64 / p.prf, compute)?;
         if (frame + 1) % step == 0 || frame + 1 == p.n_frames || last_progress.elapsed().as_secs_f64() > 1.0 {
             last_progress = std::time::Instant::now();
             kit.progress(frame + 1, p.n_frames);

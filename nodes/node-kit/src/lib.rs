@@ -688,6 +688,14 @@ impl Kit {
         &self.node
     }
 
+    /// Counts one published message of `bytes` payload bytes and records its timing
+    /// ([`Kit::record`]).
+    pub fn published(&mut self, bytes: u64, frame_id: u64, t_valid: f64, compute_ns: u64) -> Result<(), KitError> {
+        self.stats.messages_out += 1;
+        self.stats.bytes_out += bytes;
+        self.record(frame_id, t_valid, compute_ns)
+    }
+
     /// Records one processed message (compute time measured by the caller) and publishes a
     /// stage-statistics message.
     pub fn record(&mut self, frame_id: u64, t_valid: f64, compute_ns: u64) -> Result<(), KitError> {

@@ -253,9 +253,9 @@ mod tests {
         name: "test",
         about: "a test kind",
         ports: &[
-            port("rf_in", PortDir::In, MessageType::RfFrameV1, true),
-            port("iq_in", PortDir::In, MessageType::IqFrameV1, false),
-            port("rf_in", PortDir::Out, MessageType::RfFrameV1, true),
+            port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
+            port("iq_in", PortDir::In, MessageType::IqFrameV2, false),
+            port("rf_in", PortDir::Out, MessageType::RfFrameV2, true),
         ],
         dynamic_inputs: false,
         dynamic_outputs: false,
@@ -268,7 +268,7 @@ mod tests {
     #[test]
     fn kind_spec_finds_ports_by_name_and_direction() {
         let p = SPEC.port("rf_in", PortDir::In).unwrap();
-        assert_eq!((p.message_type, p.required), (MessageType::RfFrameV1, true));
+        assert_eq!((p.message_type, p.required), (MessageType::RfFrameV2, true));
         assert_eq!(SPEC.port("iq_in", PortDir::In).map(|p| p.required), Some(false));
         assert_eq!(SPEC.port("rf_in", PortDir::Out).map(|p| p.dir), Some(PortDir::Out));
         assert!(SPEC.port("iq_in", PortDir::Out).is_none());
