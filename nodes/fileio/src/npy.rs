@@ -22,6 +22,9 @@ pub struct Array {
 pub enum NpyError {
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
+    /// Writing failed; the message names the file (see [`crate::write_atomic`]).
+    #[error("{0}")]
+    Write(std::io::Error),
     #[error("{path}: not a .npy file ({detail})")]
     Format { path: String, detail: String },
     #[error("{path}: dtype {dtype} is not supported (use float32, float64, int32, int64 or uint8, little endian)")]
@@ -198,7 +201,7 @@ pub fn write_f32(path: &Path, shape: &[usize], fortran: bool, data: &[f32]) -> R
     for v in data {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    crate::write_atomic(path, &out).map_err(|e| NpyError::Io { path: path.display().to_string(), source: e })
+    crate::write_atomic(path, &out).map_err(NpyError::Write)
 }
 
 /// Writes f64 data (C order) atomically.
@@ -208,7 +211,7 @@ pub fn write_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), NpyEr
     for v in data {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    crate::write_atomic(path, &out).map_err(|e| NpyError::Io { path: path.display().to_string(), source: e })
+    crate::write_atomic(path, &out).map_err(NpyError::Write)
 }
 
 /// Writes complex64 (`<c8`, interleaved little-endian f32 re, im) data in C order atomically.
@@ -219,14 +222,14 @@ pub fn write_c64(path: &Path, shape: &[usize], data: &[C32]) -> Result<(), NpyEr
         out.extend_from_slice(&v.re.to_le_bytes());
         out.extend_from_slice(&v.im.to_le_bytes());
     }
-    crate::write_atomic(path, &out).map_err(|e| NpyError::Io { path: path.display().to_string(), source: e })
+    crate::write_atomic(path, &out).map_err(NpyError::Write)
 }
 
 /// Writes uint8 (`|u1`) data in C order atomically.
 pub fn write_u8(path: &Path, shape: &[usize], data: &[u8]) -> Result<(), NpyError> {
     let mut out = header("|u1", false, shape);
     out.extend_from_slice(data);
-    crate::write_atomic(path, &out).map_err(|e| NpyError::Io { path: path.display().to_string(), source: e })
+    crate::write_atomic(path, &out).map_err(NpyError::Write)
 }
 
 #[cfg(test)]
