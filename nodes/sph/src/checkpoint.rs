@@ -5,10 +5,11 @@
 //! header, the header (time, steps, next id, particle count, boundary bookkeeping, the parameters
 //! and open boundaries the state was computed with), then the particle arrays x, z, vx, vz, ρ, m
 //! (f64 each), kind (u8), id (u64), group (u16), and finally an FNV-1a 64-bit checksum of all the
-//! preceding bytes. Files are written to `<path>.tmp`, flushed and renamed, so a checkpoint on disk
-//! is never half written; a truncated or corrupted file is refused with a clear error.
+//! preceding bytes. Files are written to a temporary file, fsynced and renamed (with
+//! [`sonoflow_fileio::write_atomic`]), so a checkpoint on disk is never half written; a truncated
+//! or corrupted file is refused with a clear error.
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -198,16 +199,11 @@ impl Checkpoint {
         Ok(Checkpoint { header, particles: Particles { x, z, vx, vz, rho, mass, kind, id, group } })
     }
 
-    /// Writes atomically: `<path>.tmp`, flush, rename.
+    /// Writes atomically ([`sonoflow_fileio::write_atomic`]: a uniquely named temporary file in
+    /// the same folder, fsync, rename, fsync of the folder).
     pub fn write(&self, path: &Path) -> Result<(), CheckpointError> {
-        let io = |source| CheckpointError::Io { path: path.display().to_string(), source };
-        let tmp = path.with_extension("tmp");
-        {
-            let mut f = std::fs::File::create(&tmp).map_err(io)?;
-            f.write_all(&self.to_bytes()).map_err(io)?;
-            f.sync_all().map_err(io)?;
-        }
-        std::fs::rename(&tmp, path).map_err(io)
+        sonoflow_fileio::write_atomic(path, &self.to_bytes())
+            .map_err(|source| CheckpointError::Io { path: path.display().to_string(), source })
     }
 
     /// Reads and checks a checkpoint file.

@@ -208,7 +208,12 @@ fn a_run_continued_from_a_checkpoint_is_bit_identical_and_bad_files_are_refused(
     std::fs::create_dir_all(&dir).expect("dir");
     let path = dir.join("state.ckpt");
     a.checkpoint().write(&path).expect("write");
-    assert!(!path.with_extension("tmp").exists(), "temporary file renamed away");
+    let temporaries: Vec<_> = std::fs::read_dir(&dir)
+        .expect("list dir")
+        .map(|e| e.expect("dir entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(temporaries.is_empty(), "temporary file renamed away, found {temporaries:?}");
     let ck = sonoflow_sph::Checkpoint::read(&path).expect("read");
     assert_eq!(ck.header.time, 0.01);
     let params = a.params().clone();
