@@ -241,7 +241,7 @@ impl MultiLookBeamformer {
     }
 
     /// Demodulates one RF frame (element-major f32) and prepares the DAS plans for it. Call
-    /// [`Beamformer::image`] for each receive angle afterwards.
+    /// [`MultiLookBeamformer::image`] for each receive angle afterwards.
     pub fn demodulate(&mut self, h: &RfInfo, rf: &[f32]) -> Result<()> {
         let (ns, ne) = (h.n_samples, h.n_elements);
         for band in &mut self.bands {

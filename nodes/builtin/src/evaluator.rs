@@ -1,10 +1,10 @@
 //! `evaluator` node: ground truth vs estimated vector fields, per packet (paper 1's error measure,
-//! [`crate::evaluate`]). Inputs: `truth` (required; planes vx, vz, mask) and any of `raw` and
+//! [`sonoflow_evaluate`]). Inputs: `truth` (required; planes vx, vz, mask) and any of `raw` and
 //! `regularised` (planes vx, vz, optional flags), matched by packet number, and optionally
 //! `maps` (the Doppler node's colour Doppler maps, for the figures). At the end it writes
 //! `evaluation.json` and `evaluation.md` into the run folder (the launcher puts the latter into
 //! `report.md`, beside the stage times), prints one line per field and, unless
-//! `figures = false`, draws the report's figures into `<run>/figures/` ([`crate::figures`]):
+//! `figures = false`, draws the report's figures into `<run>/figures/` ([`sonoflow_evaluate::figures`]):
 //! the colour Doppler maps and the vectors over the true speed of the last evaluated packet, and
 //! the error histograms pooled over all packets. A figure that cannot be drawn is a warning in
 //! `evaluation.json`, never an error of the node. Several evaluators in one graph (e.g. two

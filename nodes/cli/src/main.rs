@@ -23,7 +23,7 @@ enum Cmd {
         /// Select a node variant: NODE=VARIANT (repeatable).
         #[arg(long = "swap", value_name = "NODE=VARIANT")]
         swap: Vec<String>,
-        /// Output folder (default runs/<graph>-<date-time>).
+        /// Output folder (default `runs/<graph>-<date-time>`).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Service prefix of this run (default: unique per run).
