@@ -239,6 +239,37 @@ fn replay_loops_and_start_offset() {
     assert!((1..40).contains(&n), "offset {offset} s replays the tail only: {n}");
 }
 
+/// Replaying a recording without a summary (its recorder was killed, or the copy was cut
+/// short): the replay node warns, naming the file and how many messages it could read, and
+/// replays exactly those.
+#[test]
+fn replaying_an_unfinished_recording_warns_and_says_how_many_messages_it_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a");
+    let out = run_graph("tests/launch/record.toml", &a, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let full = std::fs::read(a.join("recording.mcap")).unwrap();
+    // Cut in the middle: no summary, and the chunks after the cut are lost.
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &full[..full.len() / 2]).unwrap();
+    let r = McapReader::open(&cut).unwrap();
+    assert!(!r.is_complete());
+    let all: u64 = r.topics().iter().filter_map(|t| t.message_count).sum();
+    let rf = r.topics().iter().find(|t| t.topic == "rf").and_then(|t| t.message_count).unwrap();
+    assert!(rf > 0 && rf < 40, "{rf} of 40 rf messages before the cut");
+
+    let b = dir.path().join("b");
+    let set = format!("replay.path={:?}", cut.display().to_string());
+    let out = run_graph("tests/launch/replay.toml", &b, &["--set", &set]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let warning = err.lines().find(|l| l.starts_with("[replay] replay: warning: ")).unwrap_or_else(|| panic!("{err}"));
+    assert!(warning.contains(&format!("{} is unfinished (no summary", cut.display())), "{warning}");
+    assert!(warning.contains(&format!(": {all} message(s) read from ")), "{warning}");
+    assert!(warning.contains(&format!("; {rf} of them are on the replayed topics")), "{warning}");
+    assert_eq!(read_topic(&b.join("recording.mcap"), "rf_gain").len() as u64, rf);
+}
+
 /// flow → simus → recorder: every recorded RF frame equals the library's RF for the recorded
 /// particles, computed here independently with the node's per-packet plan rule (bit for bit:
 /// the library is deterministic for any thread count).

@@ -331,3 +331,151 @@ fn platelet_tools_generate_train_and_run_the_five_particles() {
     assert_ne!(code, 0);
     assert!(text.contains("none.jsonl"), "{text}");
 }
+
+// ---- recordings: inspect, inspect --verify, a closed stdout ---------------------------------
+
+/// A finished recording of 40 `RfFrameV2` messages (4096 samples each) on topic `rf`, 64 KiB
+/// chunks, and a metadata record `big` with `metadata_keys` entries (for a long `inspect`
+/// output). Returns the file's bytes.
+fn small_recording(
+    path: &std::path::Path,
+    compression: sonoflow_mcap_io::Compression,
+    metadata_keys: usize,
+    bad_message: Option<u32>,
+) -> Vec<u8> {
+    use sonoflow_mcap_io::{ChannelSpec, OutMessage, RecorderWriter, WriterOptions};
+    use sonoflow_messages::{cdr, MessageType};
+    let kind = MessageType::RfFrameV2;
+    let opts = WriterOptions { compression, chunk_size: 64 * 1024, ..WriterOptions::default() };
+    let mut w = RecorderWriter::create(path, opts).unwrap();
+    let rf = w
+        .add_channel(ChannelSpec {
+            topic: "rf".into(),
+            message_encoding: "cdr".into(),
+            schema_name: kind.schema_name(),
+            schema_encoding: "ros2msg".into(),
+            schema_data: kind.schema_text().into_bytes(),
+            metadata: Default::default(),
+        })
+        .unwrap();
+    for seq in 0..40u32 {
+        let payload: Vec<u8> = (0..4096u32).flat_map(|i| ((i * 7 + seq * 100_000) as f32).to_le_bytes()).collect();
+        // A malformed record: it declares one element more than it carries.
+        let n = if bad_message == Some(seq) { 4097 } else { 4096 };
+        let mut data = Vec::new();
+        cdr::encode_bytes_into(&vec![0u8; kind.header_size()], n, &payload, &mut data);
+        let t = 1_000_000 * u64::from(seq + 1);
+        w.write(OutMessage { channel: rf, sequence: seq, log_time: t, publish_time: t, data }).unwrap();
+    }
+    if metadata_keys > 0 {
+        w.metadata("big", (0..metadata_keys).map(|i| (format!("key{i:06}"), "x".repeat(40))).collect()).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::read(path).unwrap()
+}
+
+fn inspect(args: &[&std::ffi::OsStr]) -> (i32, String, String) {
+    let out = Command::new(bin()).arg("inspect").args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// `inspect` reads the summary only and says so; `--verify` reads every chunk: it passes an
+/// intact file (decoded counts = summary counts), and fails on bytes flipped inside a chunk,
+/// naming the chunk, although the summary (and so plain `inspect`) is still fine.
+#[test]
+fn inspect_verify_decodes_every_chunk_and_names_the_damaged_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("ok.mcap");
+    let bytes = small_recording(&rec, sonoflow_mcap_io::Compression::None, 0, None);
+
+    let (code, out, err) = inspect(&[rec.as_os_str()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("complete MCAP (summary only; run with --verify to decode every chunk and check CRCs)"),
+        "{out}"
+    );
+    assert!(out.contains("sonoflow_msgs/msg/RfFrameV2") && out.contains("40 messages"), "{out}");
+
+    let (code, out, err) = inspect(&["--verify".as_ref(), rec.as_os_str()]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(!out.contains("summary only"), "{out}");
+    assert!(out.contains("messages decoded"), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.split_whitespace().collect::<Vec<_>>() == ["rf", "40", "decoded", "40", "in", "the", "summary"]),
+        "{out}"
+    );
+    assert!(out.ends_with("verify: ok\n"), "{out}");
+
+    // Flip 200 bytes inside message 20's payload (uncompressed chunks: the bytes are in the file).
+    let needle: Vec<u8> = (0..64u32).flat_map(|i| ((i * 7 + 20 * 100_000) as f32).to_le_bytes()).collect();
+    let at = bytes.windows(needle.len()).position(|w| w == needle.as_slice()).expect("message 20 in the file");
+    let mut damaged = bytes.clone();
+    for b in &mut damaged[at + 100..at + 300] {
+        *b ^= 0xFF;
+    }
+    let bad = dir.path().join("flipped.mcap");
+    std::fs::write(&bad, &damaged).unwrap();
+
+    let (code, out, err) = inspect(&[bad.as_os_str()]);
+    assert_eq!(code, 0, "the summary is intact: {err}");
+    assert!(out.contains("summary only"), "{out}");
+
+    let (code, out, err) = inspect(&["--verify".as_ref(), bad.as_os_str()]);
+    assert_eq!(code, 1, "{out}\n{err}");
+    let prefix = format!("sonoflow: error: {} failed verification: chunk record at byte offset ", bad.display());
+    let rest = err.strip_prefix(&prefix).unwrap_or_else(|| panic!("{err}"));
+    let offset: usize = rest.split(':').next().unwrap().parse().unwrap();
+    assert!(offset < at && at - offset < 64 * 1024 + 20_000, "the chunk at {offset} holds byte {at}");
+    assert_eq!(&bytes[offset..offset + 1], &[0x06], "a chunk record starts at {offset}");
+    assert!(err.contains("Chunk CRC failed"), "{err}");
+    assert!(!out.contains("verify: ok"), "{out}");
+
+    // A record that is not a valid RfFrameV2 (CRCs fine): --verify names the message.
+    let malformed = dir.path().join("malformed.mcap");
+    small_recording(&malformed, sonoflow_mcap_io::Compression::Zstd, 0, Some(7));
+    assert_eq!(inspect(&[malformed.as_os_str()]).0, 0);
+    let (code, _, err) = inspect(&["--verify".as_ref(), malformed.as_os_str()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("message 7 on `rf` (log time 8000000, in the chunk at byte offset "), "{err}");
+    assert!(err.contains("RfFrameV2 record declares 4097 elements but carries 16384 payload bytes"), "{err}");
+}
+
+/// `sonoflow inspect … | head`: the reader goes away after a few bytes while the command still
+/// has about a megabyte to print; it must end quietly (exit status 0, or killed by SIGPIPE as
+/// documented in main.rs), not panic with "failed printing to stdout: Broken pipe".
+#[test]
+fn a_closed_stdout_ends_the_command_quietly() {
+    use std::io::Read;
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("long.mcap");
+    small_recording(&rec, sonoflow_mcap_io::Compression::Zstd, 20_000, None);
+    for verify in [false, true] {
+        let mut cmd = Command::new(bin());
+        cmd.arg("inspect");
+        if verify {
+            cmd.arg("--verify");
+        }
+        let mut child =
+            cmd.arg(&rec).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+        let mut stdout = child.stdout.take().unwrap();
+        let mut first = [0u8; 16];
+        stdout.read_exact(&mut first).unwrap();
+        drop(stdout);
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(rec.to_string_lossy().as_bytes().starts_with(&first), "{:?}", String::from_utf8_lossy(&first));
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "verify {verify}: {err}");
+        assert!(err.is_empty(), "verify {verify}: nothing on stderr: {err}");
+        assert!(
+            out.status.success() || out.status.signal() == Some(libc::SIGPIPE),
+            "verify {verify}: {:?}",
+            out.status
+        );
+    }
+}

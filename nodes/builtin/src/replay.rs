@@ -70,9 +70,6 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: ReplayParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     p.validate().map_err(anyhow::Error::msg)?;
     let reader = McapReader::open(Path::new(&p.path))?;
-    if !reader.is_complete() {
-        eprintln!("replay: {} is unfinished (no summary); replaying every complete chunk", p.path);
-    }
     let recorded: BTreeMap<String, String> = reader.topics().into_iter().map(|t| (t.topic, t.schema_name)).collect();
     let outputs_cfg = kit.cfg.outputs.clone();
     let mut outs: BTreeMap<String, (MessageType, Box<dyn DynOutput>)> = BTreeMap::new();
@@ -113,6 +110,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let start_time = first + (p.start_offset_s * 1e9) as u64;
     let total =
         reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
+    if let Some(w) = unfinished_warning(&reader, total) {
+        eprintln!("{w}");
+    }
     let mut sent = 0u64;
     let mut last_t = 0.0;
     let mut lap = 0u32;
@@ -164,4 +164,65 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     println!("replay: {sent} messages from {}", p.path);
     kit.finish()?;
     Ok(())
+}
+
+/// The warning for a recording without a summary (its recorder was killed, or the copy was cut
+/// short): replay then plays the messages of its complete chunks only, and says how many.
+/// `replayed_topics_messages` is how many of those are on the replayed topics. `None` for a
+/// complete recording.
+pub fn unfinished_warning(reader: &McapReader, replayed_topics_messages: u64) -> Option<String> {
+    let note = reader.unfinished_note()?;
+    Some(format!(
+        "replay: warning: {note}; {replayed_topics_messages} of them are on the replayed topics \
+         (`sonoflow recover` rewrites the file as a complete recording)"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sonoflow_mcap_io::{ChannelSpec, OutMessage, RecorderWriter, WriterOptions};
+
+    #[test]
+    fn an_unfinished_recording_gets_a_warning_with_the_recovered_counts() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("killed.mcap");
+        let opts = WriterOptions {
+            chunk_size: 8 * 1024,
+            flush_interval: Duration::from_secs(3600),
+            ..WriterOptions::default()
+        };
+        let mut w = RecorderWriter::create(&path, opts).expect("create");
+        let spec =
+            |topic: &str| ChannelSpec { topic: topic.into(), message_encoding: "cdr".into(), ..Default::default() };
+        let rf = w.add_channel(spec("rf")).expect("rf");
+        let other = w.add_channel(spec("other")).expect("other");
+        for seq in 0..30u32 {
+            for ch in [rf, other] {
+                let t = 1000 * u64::from(seq + 1);
+                w.write(OutMessage { channel: ch, sequence: seq, log_time: t, publish_time: t, data: vec![7; 1000] })
+                    .expect("write");
+            }
+        }
+        // Like a kill -9: the open chunk, the summary and the footer are never written.
+        w.abandon().expect("abandon");
+        let reader = McapReader::open(&path).expect("open");
+        let counts: BTreeMap<String, u64> =
+            reader.topics().into_iter().map(|t| (t.topic, t.message_count.expect("counted"))).collect();
+        let all = counts.values().sum::<u64>();
+        assert!(all > 0 && all < 60, "some messages were lost with the open chunk: {counts:?}");
+        let w = unfinished_warning(&reader, counts["rf"]).expect("a warning");
+        assert!(w.starts_with(&format!("replay: warning: {} is unfinished", path.display())), "{w}");
+        assert!(w.contains(&format!(": {all} message(s) read from ")), "{w}");
+        assert!(w.contains(&format!("; {} of them are on the replayed topics", counts["rf"])), "{w}");
+        assert!(w.contains("sonoflow recover"), "{w}");
+
+        // A finished recording: no warning.
+        let done = dir.path().join("done.mcap");
+        let mut w = RecorderWriter::create(&done, WriterOptions::default()).expect("create");
+        let rf = w.add_channel(spec("rf")).expect("rf");
+        w.write(OutMessage { channel: rf, sequence: 0, log_time: 1, publish_time: 1, data: vec![1] }).expect("write");
+        w.finish().expect("finish");
+        assert_eq!(unfinished_warning(&McapReader::open(&done).expect("open"), 1), None);
+    }
 }

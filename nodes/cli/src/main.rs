@@ -47,7 +47,13 @@ enum Cmd {
     #[command(hide = true)]
     Node { kind: String },
     /// Summarise an MCAP recording (topics, counts, completeness, counters).
-    Inspect { file: PathBuf },
+    Inspect {
+        file: PathBuf,
+        /// Also read every record: decompress every chunk and check its CRC, decode every message,
+        /// compare the counts with the summary; exit status 1 if anything is wrong.
+        #[arg(long)]
+        verify: bool,
+    },
     /// Rewrite a truncated recording (recorder killed) into a complete MCAP file.
     Recover { input: PathBuf, output: PathBuf },
     /// Remove shared-memory resources left by killed processes.
@@ -85,6 +91,9 @@ enum Cmd {
 
 fn main() {
     let cli = Cli::parse();
+    if !matches!(cli.cmd, Cmd::Node { .. }) {
+        restore_default_sigpipe();
+    }
     let code = match real_main(cli) {
         Ok(c) => c,
         Err(e) => {
@@ -157,7 +166,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
                 }
             }
         }
-        Cmd::Inspect { file } => sonoflow_tools::recording::inspect(&file),
+        Cmd::Inspect { file, verify } => sonoflow_tools::recording::inspect(&file, verify),
         Cmd::Recover { input, output } => sonoflow_tools::recording::recover(&input, &output),
         Cmd::Clean => {
             let n = sonoflow_node_kit::cleanup_dead_nodes()?;
@@ -174,6 +183,24 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Platelet { what } => sonoflow_tools::platelet::run_platelet(&what),
         Cmd::Bench { what } => sonoflow_tools::bench::run_bench(what, registry),
         Cmd::BenchPeer(args) => sonoflow_tools::bench::run_peer(args),
+    }
+}
+
+/// Lets a closed stdout end the program quietly, like any Unix tool: `sonoflow inspect rec.mcap |
+/// head` then exits by SIGPIPE (status 141 in the shell) instead of panicking with "failed printing
+/// to stdout: Broken pipe". Rust ignores SIGPIPE by default, which turns every `println!` to a
+/// closed pipe into a panic; the default action covers all output of all subcommands at once.
+///
+/// Not for `sonoflow node`: a node's stdout and stderr are pipes that the launcher reads, and if
+/// one went away mid-run a node killed outright by SIGPIPE would leave, say, a recording without
+/// its summary. There Rust's default stays: the write fails (a `println!` panics and unwinds,
+/// running destructors such as the recorder's finishing of its file). Processes that a
+/// subcommand starts are unaffected either way: Rust's `Command` restores the default SIGPIPE
+/// action before `exec`, and a Rust program (`sonoflow node`) ignores it again at start-up.
+fn restore_default_sigpipe() {
+    // SAFETY: signal(2) with SIG_DFL, called once at start-up before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

@@ -52,6 +52,13 @@
 //! order (ties in file order), filtered by topic and time range, without any error for the cut-off
 //! tail.
 //!
+//! Opening a complete file trusts its summary: chunks are decompressed (and their data checked)
+//! only when their messages are read. [`McapReader::verify`] reads the whole file instead, record
+//! by record: every chunk decompressed and CRC-checked, the data and summary section CRCs, every
+//! message linked to its channel and handed to a caller's check, and the message counts per
+//! channel compared with the summary's statistics; each problem names the byte offset of its
+//! record. [`McapReader::unfinished_note`] describes what could be read of an unfinished file.
+//!
 //! [`recover`] rewrites every readable message, schema, channel, metadata record and attachment of
 //! a possibly unfinished file into a new, finished (indexed) file, like `mcap recover`.
 //!
@@ -84,6 +91,7 @@ mod error;
 mod reader;
 mod recover;
 pub mod topics;
+mod verify;
 mod writer;
 
 use std::{fmt, str::FromStr};
@@ -94,6 +102,7 @@ pub use error::McapIoError;
 pub use reader::{InMessage, McapReader, MessageIter, ReadOptions, TopicInfo};
 pub use recover::{recover, RecoverStats};
 pub use topics::{RecordingSummary, TopicCount, TopicRecorder};
+pub use verify::{MessageView, Verification, VerifiedTopic};
 pub use writer::{ChannelId, ChannelSpec, OutMessage, RecorderWriter, WriterOptions, WriterStats};
 
 /// Chunk compression of a recording.

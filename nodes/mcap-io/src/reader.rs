@@ -9,9 +9,11 @@ use std::{
 };
 
 use mcap::{
-    read::{parse_record, ChunkReader},
+    read::parse_record,
     records::{op, ChunkIndex, MessageHeader, Record},
-    sans_io::{IndexedReadEvent, IndexedReader, IndexedReaderOptions},
+    sans_io::{
+        IndexedReadEvent, IndexedReader, IndexedReaderOptions, LinearReadEvent, LinearReader, LinearReaderOptions,
+    },
     Channel, McapError, Schema, Summary, MAGIC,
 };
 use memmap2::Mmap;
@@ -87,12 +89,12 @@ pub(crate) struct FullAttachment {
 /// mapping); a file that is still growing is fine, the reader sees it as it was at `open`.
 pub struct McapReader {
     path: PathBuf,
-    mmap: Mmap,
-    complete: bool,
+    pub(crate) mmap: Mmap,
+    pub(crate) complete: bool,
     profile: String,
     /// Channels, schemas and the chunk index: the file's own summary, or (linear mode) one
     /// rebuilt by scanning the file; chunk start times adjusted by [`tie_safe`].
-    summary: Summary,
+    pub(crate) summary: Summary,
     message_counts: Option<BTreeMap<u16, u64>>,
     metadata: Vec<(String, BTreeMap<String, String>)>,
     attachments: Vec<AttachmentInfo>,
@@ -203,6 +205,23 @@ impl McapReader {
     /// Bytes after the last intact record, which linear mode ignores (0 for complete files).
     pub fn truncated_bytes(&self) -> u64 {
         self.file_len().saturating_sub(self.valid_end)
+    }
+
+    /// For an unfinished file, one sentence on what could be read, for a warning: "PATH is
+    /// unfinished (no summary: ...): N message(s) read from K complete chunk(s); the last B
+    /// byte(s) are unreadable". `None` for a complete file.
+    pub fn unfinished_note(&self) -> Option<String> {
+        if self.complete {
+            return None;
+        }
+        let messages: u64 = self.message_counts.iter().flat_map(|m| m.values()).sum();
+        Some(format!(
+            "{} is unfinished (no summary: its writer was killed or the copy was cut short): {messages} message(s) \
+             read from {} complete chunk(s); the last {} byte(s) are unreadable",
+            self.path.display(),
+            self.summary.chunk_indexes.len(),
+            self.truncated_bytes()
+        ))
     }
 
     /// The channels, ordered by channel id.
@@ -400,7 +419,7 @@ fn read_profile(data: &[u8]) -> String {
 }
 
 /// The record at `pos`: (opcode, body, end offset), or `None` if it runs past the end of `data`.
-fn record_at(data: &[u8], pos: usize) -> Option<(u8, &[u8], usize)> {
+pub(crate) fn record_at(data: &[u8], pos: usize) -> Option<(u8, &[u8], usize)> {
     let head = data.get(pos..pos.checked_add(9)?)?;
     let opcode = head[0];
     let mut len_bytes = [0u8; 8];
@@ -583,11 +602,47 @@ impl LinearScan {
     }
 }
 
-/// Decompresses and CRC-checks one chunk, collecting its schemas, channels and message stats.
-fn scan_chunk(header: mcap::records::ChunkHeader, compressed: &[u8]) -> Option<Pending> {
+/// The largest uncompressed chunk [`chunk_records`] decodes: a bound on what a corrupt size field
+/// can make it allocate.
+pub(crate) const MAX_CHUNK_BYTES: usize = 2 << 30;
+
+/// The records inside one chunk; `record` is the whole chunk record (opcode, length, body).
+///
+/// The chunk is decompressed and its CRC checked before any record is parsed, and sizes are
+/// bounded by [`MAX_CHUNK_BYTES`] and by `record` itself, so corrupt data gives an error, never a
+/// panic or a huge allocation (`mcap::read::ChunkReader` sets no such bound: a damaged length
+/// field inside a chunk makes it attempt the allocation and panic).
+pub(crate) fn chunk_records(record: &[u8]) -> Result<Vec<Record<'static>>, McapError> {
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_skip_end_magic(true)
+            .with_emit_chunks(false)
+            .with_prevalidate_chunk_crcs(true)
+            .with_record_length_limit(MAX_CHUNK_BYTES),
+    );
+    let mut rest = record;
+    let mut records = Vec::new();
+    while let Some(event) = reader.next_event() {
+        match event? {
+            LinearReadEvent::ReadRequest(need) => {
+                let n = need.min(rest.len());
+                reader.insert(n).copy_from_slice(&rest[..n]);
+                reader.notify_read(n);
+                rest = &rest[n..];
+            }
+            LinearReadEvent::Record { data, opcode } => records.push(parse_record(opcode, data)?.into_owned()),
+        }
+    }
+    Ok(records)
+}
+
+/// Decompresses and CRC-checks one chunk (`record`: the whole chunk record), collecting its
+/// schemas, channels and message stats.
+fn scan_chunk(record: &[u8]) -> Option<Pending> {
     let mut pending = Pending::default();
-    for record in ChunkReader::new(header, compressed).ok()? {
-        match record.ok()? {
+    for record in chunk_records(record).ok()? {
+        match record {
             Record::Schema { header, data } => {
                 pending.schemas.push((header.id, header.name, header.encoding, data.into_owned()));
             }
@@ -621,11 +676,11 @@ fn scan_linear(data: &[u8]) -> LinearScan {
         match opcode {
             0 => ok = false,
             op::CHUNK => match parse_record(opcode, body) {
-                Ok(Record::Chunk { header, data }) => {
+                Ok(Record::Chunk { header, .. }) => {
                     let compression = header.compression.clone();
                     let compressed_size = header.compressed_size;
                     let uncompressed_size = header.uncompressed_size;
-                    match scan_chunk(header, &data) {
+                    match scan_chunk(&data[pos..end]) {
                         Some(p) => {
                             for (id, name, encoding, bytes) in p.schemas {
                                 ok &= scan.add_schema(id, name, encoding, bytes);
