@@ -95,6 +95,7 @@
 
 pub mod dct;
 pub mod divfree;
+pub mod field;
 pub mod gcv;
 mod kernels;
 mod nearest;
@@ -105,5 +106,6 @@ mod smoothn;
 pub use crate::divfree::{
     wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,
 };
+pub use crate::field::{FieldError, FieldRegulariser, FieldReport, PlaneRole, RegulariserParams};
 pub use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};
 pub use crate::smoothn::{smoothn, Smoothn, SmoothnReport, OUTLIER_WEIGHT};
