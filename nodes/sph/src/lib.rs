@@ -21,6 +21,9 @@
 //! * [`walls`]: prescribed wall motion and the fluid domain of the anti-penetration guard.
 //! * [`geometry`]: 2D vessel geometries (branches, openings; straight tube, stenosis, carotid
 //!   bifurcation presets) and their initial particle set (fluid lattice, wall particles, reservoirs).
+//! * [`producer`]: the flow as a scatterer producer (what the `sph-flow` node runs): parameters,
+//!   scene, solver or checkpoint, the acquisition schedule as a stream of events (particle
+//!   snapshots with amplitudes, SPH-interpolated truth on a grid, diagnostics instants).
 
 pub mod analytic;
 pub mod boundary;
@@ -31,6 +34,7 @@ pub mod kernel;
 pub mod neighbours;
 pub mod params;
 pub mod particles;
+pub mod producer;
 pub mod setup;
 pub mod solver;
 mod step;

@@ -1,0 +1,193 @@
+use super::*;
+
+fn params(v: serde_json::Value) -> Result<Prepared, String> {
+    let p: ProducerParams = serde_json::from_value(v).map_err(|e| e.to_string())?;
+    p.prepare().map_err(|e| e.to_string())
+}
+
+#[test]
+fn amplitudes_are_a_function_of_seed_and_id_with_the_requested_spread() {
+    assert_eq!(amplitude(3, 17, 1.0), amplitude(3, 17, 1.0));
+    assert_ne!(amplitude(3, 17, 1.0), amplitude(4, 17, 1.0));
+    let n = 200_000u64;
+    let v: Vec<f64> = (0..n).map(|id| amplitude(1, id, 2.0) as f64).collect();
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let var = v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n as f64;
+    // standard errors: mean 2/√n = 0.0045, variance 4·√(2/n) = 0.0126
+    assert!(mean.abs() < 0.02, "{mean}");
+    assert!((var - 4.0).abs() < 0.06, "{var}");
+    let kurt = v.iter().map(|a| (a - mean).powi(4)).sum::<f64>() / n as f64 / (var * var);
+    assert!((kurt - 3.0).abs() < 0.1, "Gaussian kurtosis {kurt}");
+}
+
+#[test]
+fn parameters_are_checked_with_named_fields() {
+    let p = params(serde_json::json!({ "dx": 0.3e-3, "schedule": { "n_packets": 1 } })).expect("valid");
+    assert!((p.solver.h - 0.36e-3).abs() < 1e-15, "h from h_over_dx");
+    let p = params(serde_json::json!({ "dx": 0.3e-3, "solver": { "h": 0.5e-3 } })).expect("valid");
+    assert_eq!(p.solver.h, 0.5e-3, "h given");
+    let e = params(serde_json::json!({ "geometry": "aorta" })).expect_err("bad preset");
+    assert!(e.contains("not a preset"), "{e}");
+    let e = params(serde_json::json!({ "solver": { "c": -1.0 } })).expect_err("bad c");
+    assert!(e.contains("solver.") && e.contains("`c`"), "{e}");
+    let e = params(serde_json::json!({ "solver": { "speed_of_sound": 3.0 } })).expect_err("unknown");
+    assert!(e.contains("speed_of_sound"), "{e}");
+    let e = params(serde_json::json!({ "solver": { "kernel": "gauss" } })).expect_err("bad kernel");
+    assert!(e.contains("kernel") && e.contains("gauss"), "{e}");
+    let e = params(serde_json::json!({ "dx": 0.0 })).expect_err("dx");
+    assert!(e.starts_with("dx = 0 is out of range"), "{e}");
+    let e = params(serde_json::json!({ "inflow": { "type": "cosine", "amplitude": 1.0, "period": -1.0 } }))
+        .expect_err("period");
+    assert!(e.contains("inflow.period"), "{e}");
+    let e = params(serde_json::json!({ "run_until": 0.0, "schedule": { "t_start": 0.5 } })).expect_err("run_until");
+    assert!(e.contains("run_until"), "{e}");
+    let e = params(serde_json::json!({ "bogus": 1 })).expect_err("unknown key");
+    assert!(e.contains("bogus"), "{e}");
+    let bad = |v: serde_json::Value| {
+        let p: ProducerParams = serde_json::from_value(v).expect("parses");
+        p.prepare().expect_err("invalid").field
+    };
+    assert_eq!(bad(serde_json::json!({ "h_over_dx": 5.0 })), "h_over_dx");
+    assert_eq!(bad(serde_json::json!({ "amplitude_sigma": -1.0 })), "amplitude_sigma");
+    assert_eq!(bad(serde_json::json!({ "schedule": { "prf": 0.0 } })), "schedule.prf");
+    assert_eq!(
+        bad(serde_json::json!({ "truth_grid": { "nx": 0, "nz": 1, "x0": 0.0, "z0": 0.0, "dx": 1.0, "dz": 1.0 } })),
+        "truth_grid.nx"
+    );
+    assert_eq!(bad(serde_json::json!({ "solver": { "c": 0.0 } })), "solver.c");
+    assert_eq!(bad(serde_json::json!({ "ramp_time": -1.0 })), "ramp_time");
+}
+
+#[test]
+fn the_launch_files_parameters_parse_with_their_defaults() {
+    let carotid: ProducerParams = toml::from_str(
+        r#"
+geometry = "carotid"
+dx = 0.15e-3
+inflow = { type = "carotid", peak = 0.39, mean = 0.1875, period = 0.83 }
+initial_velocity = "fully-developed"
+amplitude_sigma = 1.0
+seed = 1
+schedule = { prf = 10000.0, packet_size = 32, n_packets = 8, packet_interval = 0.1, t_start = 0.1001 }
+truth_grid = { nx = 161, nz = 111, x0 = -0.016, z0 = 0.012, dx = 0.2e-3, dz = 0.2e-3 }
+checkpoint_in = "warm.ckpt"
+[solver]
+c = 5.5
+mu = 4e-3
+rho0 = 1000.0
+shifting = 2.0
+density_diffusion = 0.1
+integrator = "single-evaluation"
+"#,
+    )
+    .expect("carotid.toml's params");
+    let p = carotid.prepare().expect("valid");
+    assert_eq!(p.solver.h, 1.2 * 0.15e-3);
+    assert_eq!(p.solver.c, 5.5);
+    assert_eq!(p.build.relax_iterations, 200);
+    assert_eq!(carotid.stats_interval, 0.01);
+    assert_eq!(carotid.checkpoint_in, Some(PathBuf::from("warm.ckpt")));
+    let d: ProducerParams = serde_json::from_value(serde_json::json!({})).expect("empty table");
+    assert_eq!(d, ProducerParams::default());
+    assert_eq!(d.geometry, GeometrySpec::Preset("carotid".into()));
+    assert_eq!((d.dx, d.h_over_dx, d.amplitude_sigma, d.seed), (0.15e-3, 1.2, 1.0, 0));
+    assert_eq!(d.initial_velocity, crate::geometry::InitialVelocity::FullyDeveloped);
+}
+
+/// A straight tube through two packets of four frames: the events come in time order (pieces of
+/// stepping, frames, the truth between the middle frames), then stepping to `run_until`.
+#[test]
+fn events_follow_the_schedule_and_the_truth_sits_at_each_packets_mid_time() {
+    let prep = params(serde_json::json!({
+        "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
+        "inflow": { "type": "constant", "value": 0.05 },
+        "solver": { "c": 1.0 },
+        "schedule": { "prf": 10000.0, "packet_size": 4, "n_packets": 2, "packet_interval": 0.002, "t_start": 0.001 },
+        "truth_grid": { "nx": 9, "nz": 5, "x0": -0.004, "z0": 0.012, "dx": 1e-3, "dz": 4e-3 },
+        "stats_interval": 5e-4, "run_until": 0.004, "seed": 3,
+    }))
+    .expect("valid");
+    let mut producer = Producer::new(&prep, true).expect("built");
+    assert!(producer.take_log()[0].contains("fluid"));
+    let mut outputs = Vec::new();
+    let mut stats = Vec::new();
+    let mut last_time = 0.0;
+    while let Some(ev) = producer.next_event().expect("runs") {
+        match ev {
+            Event::Advanced { time, stats: s } => {
+                assert!(time > last_time);
+                last_time = time;
+                if let Some(pr) = s {
+                    stats.push((time, pr));
+                }
+            }
+            Event::Snapshot(s) => {
+                assert_eq!(s.at.t, producer.time());
+                let n = s.particles.len();
+                assert!(n > 100 && s.particles.amplitude.len() == n && s.dt > 0.0);
+                for i in 0..n {
+                    assert!(s.particles.x[i] >= s.bbox[0] && s.particles.x[i] <= s.bbox[1]);
+                    assert!(s.particles.z[i] >= s.bbox[2] && s.particles.z[i] <= s.bbox[3]);
+                    assert_eq!(s.particles.amplitude[i], amplitude(3, s.particles.id[i] as u64, 1.0));
+                }
+                outputs.push(("frame", s.at.frame_id, s.at.t));
+            }
+            Event::Truth(f) => {
+                assert_eq!(f.t, producer.time());
+                assert_eq!(f.truth.vx.len(), 45);
+                let inside: usize = f.truth.mask.iter().map(|&m| m as usize).sum();
+                assert!(inside > 0 && inside < 45, "{inside}");
+                for i in 0..45 {
+                    if f.truth.mask[i] == 0 {
+                        assert_eq!((f.truth.vx[i], f.truth.vz[i]), (0.0, 0.0));
+                    }
+                }
+                outputs.push(("truth", f.frame_id, f.t));
+            }
+        }
+    }
+    let kinds: Vec<(&str, u64)> = outputs.iter().map(|o| (o.0, o.1)).collect();
+    let f = |id| ("frame", id);
+    assert_eq!(kinds, [f(0), f(1), ("truth", 2), f(2), f(3), f(4), f(5), ("truth", 6), f(6), f(7)]);
+    assert_eq!(producer.time(), 0.004, "ends on run_until");
+    assert_eq!(producer.last_frame_time(), outputs[9].2);
+    // diagnostics instants every 0.5 ms from the start (t = 0); the pieces before the first frame
+    // (1 ms) pass three of them at once, so the next three pieces report (catching up); progress in
+    // 0.1 ms of simulated time
+    let times: Vec<Real> = stats.iter().map(|s| s.0).collect();
+    let expected = [0.001, 0.0011, 0.00115, 0.0015, 0.002, 0.0025, 0.003, 0.0035, 0.004];
+    assert_eq!(times.len(), expected.len(), "{stats:?}");
+    for (t, e) in times.iter().zip(expected) {
+        assert!((t - e).abs() < 1e-12, "{stats:?}");
+    }
+    assert_eq!(stats[0].1, Progress { done: 10, total: 40 });
+    assert_eq!(stats.last().map(|s| s.1), Some(Progress { done: 40, total: 40 }));
+    assert!(producer.summary().contains("8 frames"), "{}", producer.summary());
+    assert!(producer.write_checkpoint(None).expect("nothing to write").is_none());
+}
+
+#[test]
+fn a_schedule_before_the_checkpoint_is_refused() {
+    let dir = std::env::temp_dir().join(format!("sonoflow-sph-producer-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let base = serde_json::json!({
+        "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
+        "inflow": { "type": "constant", "value": 0.05 }, "solver": { "c": 1.0 },
+        "schedule": { "packet_size": 1, "t_start": 0.0 }, "run_until": 0.0005, "checkpoint_out": "a.ckpt",
+    });
+    let mut producer = Producer::new(&params(base.clone()).expect("valid"), false).expect("built");
+    while producer.next_event().expect("runs").is_some() {}
+    let path = producer.write_checkpoint(Some(&dir)).expect("written").expect("a path");
+    assert_eq!(path, dir.join("a.ckpt"));
+    let mut resumed = base;
+    resumed["checkpoint_in"] = serde_json::json!(path);
+    resumed["run_until"] = serde_json::json!(0.001);
+    resumed["schedule"]["t_start"] = serde_json::json!(0.0006);
+    let mut producer = Producer::new(&params(resumed.clone()).expect("valid"), false).expect("resumed");
+    assert_eq!(producer.time(), 0.0005);
+    assert!(producer.take_log().iter().any(|l| l.starts_with("resumed from")));
+    resumed["schedule"]["t_start"] = serde_json::json!(0.0001);
+    let e = Producer::new(&params(resumed).expect("valid"), false).err().expect("refused");
+    assert!(e.to_string().contains("before the solver's start time"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
