@@ -1,6 +1,7 @@
 //! A platelet suspension ready to run (paper 2, Algorithm 2 with an analytic or SPH carrier): a carrier
 //! flow, the particles, the dynamics and the coefficient model, built from plain serde parameters
-//! (the `[params]` of the `platelets` node deserialise into [`SuspensionParams`]).
+//! ([`SuspensionParams`]; the `[params]` of the `platelets` node deserialise into
+//! [`PlateletsParams`], which adds the output schedule, and the node's run is [`Driver`]).
 //!
 //! Seeding: `particles = { count = N }` draws N shapes from [`ShapeSampler`] (eq 7's means and
 //! spreads), positions uniform in the fluid (rejection against the local walls for the stenosis)
@@ -28,7 +29,12 @@ use crate::shape::{Shape, ShapeSampler};
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
 
+pub mod driver;
 mod particle_carrier;
+pub use driver::{
+    check_fluid_input, Driver, DriverError, FluidReport, FluidSnapshot, FluidSource, Frame, FrameMap, Hooks,
+    OutputParams, PlateletState, PlateletsParams, Received, TimingReport,
+};
 pub use particle_carrier::{LatticeSpec, ParticleCarrier, MAX_LATTICE_NODES, MAX_SUPPORT_SPACINGS};
 
 /// The folder of the trained networks shipped with this crate (`nodes/platelet/weights`).
@@ -186,6 +192,9 @@ pub enum SuspensionError {
     /// A parameter outside its allowed range.
     #[error("platelet suspension: `{field}` = {value} is invalid: allowed {allowed}")]
     Invalid { field: String, value: String, allowed: String },
+    /// A parameter of the node's output schedule or mapping ([`OutputParams`]) outside its range.
+    #[error("{field} = {value} is out of range: {allowed}")]
+    OutOfRange { field: String, value: String, allowed: String },
     /// Carrier parameters.
     #[error("carrier: {0}")]
     Flow(#[from] FlowError),
