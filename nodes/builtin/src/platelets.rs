@@ -143,7 +143,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let report = d.finish(received);
     if let Some(dir) = &kit.cfg.out_dir {
         let path = std::path::Path::new(dir).join(format!("{}.json", kit.cfg.node_name));
-        std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+        sonoflow_fileio::write_atomic(&path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     kit.finish()?;
     Ok(())
