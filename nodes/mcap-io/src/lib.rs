@@ -83,6 +83,8 @@
 mod error;
 mod reader;
 mod recover;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 mod writer;
 
 use std::{fmt, str::FromStr};

@@ -64,6 +64,8 @@ pub mod scan;
 mod scatterers;
 mod simd;
 mod simus;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 mod transmit;
 
 pub use error::{Result, SimusError};

@@ -33,6 +33,8 @@ pub mod params;
 pub mod particles;
 pub mod setup;
 pub mod solver;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod walls;
 pub mod waveform;
 pub mod wcsph;
