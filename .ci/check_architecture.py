@@ -3,7 +3,8 @@
 
 1. Its crate table has one row per workspace crate (folder and package as in `cargo metadata`),
    and the "may depend on" column equals each crate's workspace dependencies: normal ones
-   unmarked, dev-only ones after "dev:" (a crate listed as normal may also be a dev dependency).
+   unmarked, optional ones (behind a feature such as `testkit`) after "testkit:", dev-only ones
+   after "dev:" (a crate listed as normal may also be a dev dependency).
 2. No cycles between the top-level modules of any crate: module A of a crate "uses" module B when
    A's files mention `crate::B` or `super::B` at top level (or `B::` in lib.rs/main.rs re-exports
    are ignored). Cycles make a crate's parts impossible to read one at a time.
@@ -31,28 +32,34 @@ with open(os.path.join(ROOT, "ARCHITECTURE.md"), encoding="utf-8") as f:
         folder = cells[0].strip("`").rstrip("/")
         package = re.match(r"`([^`]+)`", cells[1]).group(1)
         deps = cells[-1]
-        normal, dev = set(), set()
+        normal, optional, dev = set(), set(), set()
         for part in deps.split(";"):
             part = part.strip()
             target = normal
             if part.startswith("dev:"):
                 target, part = dev, part[4:]
+            elif part.startswith("testkit:"):
+                target, part = optional, part[8:]
             target.update(re.findall(r"`(sonoflow[-\w]*)`", part))
-        rows[package] = (folder, normal, dev)
+        rows[package] = (folder, normal, optional, dev)
 
 for name, p in sorted(members.items()):
     folder = os.path.relpath(os.path.dirname(p["manifest_path"]), ROOT)
     if name not in rows:
         problems.append(f"ARCHITECTURE.md has no row for {name} ({folder})")
         continue
-    rfolder, rnormal, rdev = rows.pop(name)
+    rfolder, rnormal, roptional, rdev = rows.pop(name)
     if rfolder != folder:
         problems.append(f"{name}: table says folder {rfolder}, cargo says {folder}")
-    normal = {d["name"] for d in p["dependencies"] if d["name"] in members and d["kind"] is None and d["name"] != name}
-    dev = {d["name"] for d in p["dependencies"] if d["name"] in members and d["kind"] == "dev" and d["name"] != name}
+    ws = [d for d in p["dependencies"] if d["name"] in members and d["name"] != name]
+    normal = {d["name"] for d in ws if d["kind"] is None and not d["optional"]}
+    optional = {d["name"] for d in ws if d["kind"] is None and d["optional"]}
+    dev = {d["name"] for d in ws if d["kind"] == "dev"}
     if normal != rnormal:
         problems.append(f"{name}: dependencies {sorted(normal)}, table says {sorted(rnormal)}")
-    if not (dev - normal) <= rdev or not rdev <= dev:
+    if optional != roptional:
+        problems.append(f"{name}: optional (testkit) dependencies {sorted(optional)}, table says testkit: {sorted(roptional)}")
+    if not (dev - normal - optional) <= rdev or not rdev <= dev:
         problems.append(f"{name}: dev-dependencies {sorted(dev - normal)}, table says dev: {sorted(rdev)}")
 for name in rows:
     problems.append(f"ARCHITECTURE.md lists {name}, which is not a workspace crate")

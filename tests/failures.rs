@@ -4,6 +4,9 @@
 
 mod common;
 use common::*;
+use sonoflow_launcher::testkit::{
+    dangling_input_and_type_mismatch, out_of_range_params, two_producers, unknown_key, MINIMAL_GRAPH, TOML_SYNTAX_ERROR,
+};
 use sonoflow_mcap_io::{McapReader, ReadOptions};
 use std::process::Command;
 
@@ -20,8 +23,7 @@ fn count(path: &std::path::Path, topic: &str) -> usize {
 /// A clean small run: proves no stale resource from a killed run gets in the way.
 fn next_run_is_clean() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph("tests/launch/record.toml", dir.path(), &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/record.toml", dir.path(), &[]);
     assert_eq!(count(&dir.path().join("recording.mcap"), "rf_gain"), 40);
 }
 
@@ -82,31 +84,15 @@ fn check(text: &str, extra: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).to_string())
 }
 
-const GOOD: &str = r#"
-[graph]
-name = "g"
-[topics]
-rf = { type = "RfFrameV2", max_elements = 1024 }
-[nodes.source]
-kind = "test-source"
-outputs = { rf = "rf" }
-params = { n_frames = 2, n_channels = 4, n_samples = 16 }
-[nodes.checker]
-kind = "checker"
-inputs = { rf = "rf" }
-"#;
-
 #[test]
 fn malformed_launch_files_give_one_clear_error_per_problem() {
-    assert_eq!(check(GOOD, &[]).0, 0, "{}", check(GOOD, &[]).1);
+    assert_eq!(check(MINIMAL_GRAPH, &[]).0, 0, "{}", check(MINIMAL_GRAPH, &[]).1);
     let cases: &[(&str, &[&str], &[&str])] = &[
         // unknown key
-        (&GOOD.replace("[graph]\n", "[graph]\ncolour = 1\n"), &[], &["unknown field `colour`"]),
+        (&unknown_key(), &[], &["unknown field `colour`"]),
         // dangling input + type mismatch + unknown topic
         (
-            &GOOD
-                .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
-                .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV2\", max_elements = 10 }\n"),
+            &dangling_input_and_type_mismatch(),
             &[],
             &[
                 "carries RfFrameV2 but topic `iq` is IqFrameV2",
@@ -115,34 +101,30 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
         ),
         // out-of-range params, several at once
         (
-            &GOOD.replace("n_channels = 4", "n_channels = 0").replace("max_elements = 1024", "max_elements = 0"),
+            &out_of_range_params(),
             &[],
             &["n_channels = 0 is out of range: 1 ..= 1024", "topics.rf.max_elements = 0 is out of range"],
         ),
         // unknown kind, unknown port
-        (&GOOD.replace("kind = \"checker\"", "kind = \"chekcer\""), &[], &["kind `chekcer` is unknown"]),
+        (&MINIMAL_GRAPH.replace("kind = \"checker\"", "kind = \"chekcer\""), &[], &["kind `chekcer` is unknown"]),
         (
-            &GOOD.replace("outputs = { rf = \"rf\" }", "outputs = { rf = \"rf\", iq = \"rf\" }"),
+            &MINIMAL_GRAPH.replace("outputs = { rf = \"rf\" }", "outputs = { rf = \"rf\", iq = \"rf\" }"),
             &[],
             &["no output port `iq`"],
         ),
         // two producers
-        (
-            &format!("{GOOD}\n[nodes.source2]\nkind = \"test-source\"\noutputs = {{ rf = \"rf\" }}\n"),
-            &[],
-            &["topic `rf` has 2 producers"],
-        ),
+        (&two_producers(), &[], &["topic `rf` has 2 producers"]),
         // bad --set and --swap
-        (GOOD, &["--set", "source.n_frames=-3"], &["n_frames"]),
-        (GOOD, &["--set", "nosuch.x=1"], &["no node `nosuch`"]),
-        (GOOD, &["--swap", "source=fast"], &["node `source` has no variant `fast`"]),
+        (MINIMAL_GRAPH, &["--set", "source.n_frames=-3"], &["n_frames"]),
+        (MINIMAL_GRAPH, &["--set", "nosuch.x=1"], &["no node `nosuch`"]),
+        (MINIMAL_GRAPH, &["--swap", "source=fast"], &["node `source` has no variant `fast`"]),
         // exec that does not exist, TOML syntax error
         (
-            &GOOD.replace("kind = \"checker\"", "exec = \"./no-such-binary\""),
+            &MINIMAL_GRAPH.replace("kind = \"checker\"", "exec = \"./no-such-binary\""),
             &[],
             &["exec `./no-such-binary` not found"],
         ),
-        ("[graph\nname = 1", &[], &["TOML parse error"]),
+        (TOML_SYNTAX_ERROR, &[], &["TOML parse error"]),
     ];
     for (text, extra, needles) in cases {
         let (code, err) = check(text, extra);

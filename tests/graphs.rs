@@ -59,12 +59,10 @@ fn record_then_replay_gives_identical_downstream_bytes() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a");
     let b = dir.path().join("b");
-    let out = run_graph("tests/launch/record.toml", &a, &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/record.toml", &a, &[]);
     let rec_a = a.join("recording.mcap");
     let set = format!("replay.path={:?}", rec_a.display().to_string());
-    let out = run_graph("tests/launch/replay.toml", &b, &["--set", &set]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/replay.toml", &b, &["--set", &set]);
     let live = read_topic(&rec_a, "rf_gain");
     let replayed = read_topic(&b.join("recording.mcap"), "rf_gain");
     assert_eq!(live.len(), 40);
@@ -90,8 +88,7 @@ fn record_then_replay_gives_identical_downstream_bytes() {
 #[test]
 fn python_mcap_reads_the_recording_and_numpy_decodes_rf() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph("tests/launch/record.toml", dir.path(), &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/record.toml", dir.path(), &[]);
     let frame = 17u64;
     let (nc, ns) = (32usize, 1024usize);
     let mut values = Vec::new();
@@ -132,8 +129,7 @@ fn python_mcap_reads_the_recording_and_numpy_decodes_rf() {
 #[test]
 fn quickstart_recording_matches_the_library() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=2"]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=2"]);
     let rec = dir.path().join("recording.mcap");
     let snaps = read_topic(&rec, "particles");
     assert_eq!(snaps.len(), 64);
@@ -208,13 +204,11 @@ fn python_with_mcap() -> std::path::PathBuf {
 fn replay_loops_and_start_offset() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a");
-    let out = run_graph("tests/launch/record.toml", &a, &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/record.toml", &a, &[]);
     let rec = a.join("recording.mcap");
     let set = format!("replay.path={}", rec.display());
     let b = dir.path().join("b");
-    let out = run_graph("tests/launch/replay.toml", &b, &["--set", &set, "--set", "replay.loops=2"]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/replay.toml", &b, &["--set", &set, "--set", "replay.loops=2"]);
     // The recorder of the replay graph records rf_gain only; the gain stage resets flags, so
     // look at frame ids: two laps of 0..40.
     let frames: Vec<u64> = read_topic(&b.join("recording.mcap"), "rf_gain")
@@ -233,8 +227,7 @@ fn replay_loops_and_start_offset() {
     let offset = (times[times.len() - 1] - times[0]) as f64 / 1e9;
     let c = dir.path().join("c");
     let off = format!("replay.start_offset_s={offset}");
-    let out = run_graph("tests/launch/replay.toml", &c, &["--set", &set, "--set", &off]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("tests/launch/replay.toml", &c, &["--set", &set, "--set", &off]);
     let n = read_topic(&c.join("recording.mcap"), "rf_gain").len();
     assert!((1..40).contains(&n), "offset {offset} s replays the tail only: {n}");
 }
@@ -276,12 +269,11 @@ fn replaying_an_unfinished_recording_warns_and_says_how_many_messages_it_read() 
 #[test]
 fn simus_node_rf_equals_the_library() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph(
+    run_graph_ok(
         "launch/rf-quickstart.toml",
         dir.path(),
         &["--set", "flow.schedule.packet_size=3", "--set", "flow.density_per_mm2=2.0"],
     );
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let rec = dir.path().join("recording.mcap");
     let snaps = read_topic(&rec, "particles");
     let rfs = read_topic(&rec, "rf");
@@ -319,8 +311,7 @@ fn regulariser_node_equals_the_library_and_removes_outliers() {
     use sonoflow_builtin::regulariser::{Regulariser, RegulariserParams};
     use sonoflow_messages::{plane, VECTOR_REGULARISED};
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph("launch/regularise-demo.toml", dir.path(), &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("launch/regularise-demo.toml", dir.path(), &[]);
     let rec = dir.path().join("recording.mcap");
     let (truth, raw, reg) = (read_topic(&rec, "truth"), read_topic(&rec, "raw"), read_topic(&rec, "regularised"));
     assert_eq!((truth.len(), raw.len(), reg.len()), (8, 8, 8));
@@ -405,9 +396,7 @@ fn quickstart_chain_measures_the_vessel_velocity() {
     for estimator in ["autocorrelation", "loupas"] {
         let dir = tempfile::tempdir().unwrap();
         let set = format!("doppler.estimator=\"{estimator}\"");
-        let out =
-            run_graph("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=1", "--set", &set]);
-        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        run_graph_ok("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=1", "--set", &set]);
         let rec = dir.path().join("recording.mcap");
         let (truth, raw, reg, maps) = (
             read_topic(&rec, "truth"),
@@ -587,8 +576,7 @@ fn fitted_omega(v: &[f32], mask: &[f32], g: &sonoflow_messages::GridV1, xc: f64,
 #[test]
 fn rotating_disk_rotation_rate_is_recovered() {
     let dir = tempfile::tempdir().unwrap();
-    let out = run_graph("launch/rotating-disk.toml", dir.path(), &["--set", "flow.schedule.n_packets=1"]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    run_graph_ok("launch/rotating-disk.toml", dir.path(), &["--set", "flow.schedule.n_packets=1"]);
     let rec = dir.path().join("recording.mcap");
     let (th, tv) = cdr::decode::<VectorField>(&read_topic(&rec, "truth")[0]).unwrap();
     let (_, rv) = cdr::decode::<VectorField>(&read_topic(&rec, "vector")[0]).unwrap();

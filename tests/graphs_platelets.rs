@@ -5,7 +5,6 @@
 
 mod common;
 use common::*;
-use sonoflow_mcap_io::{McapReader, ReadOptions};
 use sonoflow_messages::cdr;
 use sonoflow_messages::types::{ParticleSnapshot, VectorField};
 use sonoflow_messages::{plane, PARTICLE_PLATELET};
@@ -31,12 +30,7 @@ fn stenosis_scene_records_platelets_inside_the_channel_moving_with_the_flow() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(err.contains("advection") && err.contains("coefficients (network)"), "no timing split in the log: {err}");
 
-    let r = McapReader::open(&run.join("recording.mcap")).unwrap();
-    let msgs: Vec<Vec<u8>> = r
-        .messages(&ReadOptions { topics: Some(vec!["platelets".into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap().data)
-        .collect();
+    let msgs = read_topic(&run.join("recording.mcap"), "platelets");
     // the initial state and one snapshot per macro step
     assert_eq!(msgs.len(), 3);
 
@@ -289,14 +283,8 @@ fn bad_platelet_parameters_are_caught_by_check() {
 fn five_explicit_platelets_follow_the_ramped_channel_flow() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let out = run_graph("tests/launch/five-platelets.toml", &run, &[]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let r = McapReader::open(&run.join("recording.mcap")).unwrap();
-    let msgs: Vec<Vec<u8>> = r
-        .messages(&ReadOptions { topics: Some(vec!["platelets".into()]), start_time: None, end_time: None })
-        .unwrap()
-        .map(|m| m.unwrap().data)
-        .collect();
+    run_graph_ok("tests/launch/five-platelets.toml", &run, &[]);
+    let msgs = read_topic(&run.join("recording.mcap"), "platelets");
     assert_eq!(msgs.len(), 11);
     let (x0, z0) = (-6e-3, 19e-3);
     let (h, v_in, y0) = (2e-3, 5e-3, 0.5176e-3);

@@ -5,6 +5,8 @@
 mod common;
 use common::bin;
 use sonoflow_fileio::npy;
+use sonoflow_regularise::testkit::rms_diff;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn smoothn_cli(args: &[&str]) -> (i32, String, String) {
@@ -45,16 +47,19 @@ fn noisy_field() -> (Vec<f64>, Vec<f64>) {
     (clean, noisy)
 }
 
-fn rms(a: &[f64], b: &[f64]) -> f64 {
-    (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+/// [`noisy_field`] written as a (2, 30, 40) f64 array to `dir/field.npy`: (clean, noisy, the path).
+fn noisy_field_file(dir: &Path) -> (Vec<f64>, Vec<f64>, PathBuf) {
+    let (clean, noisy) = noisy_field();
+    let inp = dir.join("field.npy");
+    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    (clean, noisy, inp)
 }
 
 #[test]
 fn smoothn_tool_matches_the_library_and_writes_a_sidecar() {
     let dir = tempfile::tempdir().unwrap();
-    let (clean, noisy) = noisy_field();
-    let (inp, out) = (dir.path().join("field.npy"), dir.path().join("smooth.npy"));
-    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    let (clean, noisy, inp) = noisy_field_file(dir.path());
+    let out = dir.path().join("smooth.npy");
     let (code, stdout, stderr) =
         smoothn_cli(&["--in", inp.to_str().unwrap(), "--robust", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
@@ -71,11 +76,11 @@ fn smoothn_tool_matches_the_library_and_writes_a_sidecar() {
     assert_eq!(side["missing_values"].as_u64().unwrap() as usize, noisy.iter().filter(|v| v.is_nan()).count());
     // Robust smoothing recovers the clean field far better than the data are (outliers of ±2).
     let finite: Vec<usize> = (0..noisy.len()).filter(|&i| noisy[i].is_finite()).collect();
-    let e_data = rms(
+    let e_data = rms_diff(
         &finite.iter().map(|&i| noisy[i]).collect::<Vec<_>>(),
         &finite.iter().map(|&i| clean[i]).collect::<Vec<_>>(),
     );
-    let e_out = rms(&got.data, &clean);
+    let e_out = rms_diff(&got.data, &clean);
     assert!(e_out < 0.1 * e_data, "data {e_data}, smoothed {e_out}");
 }
 
@@ -105,9 +110,8 @@ fn smoothn_tool_fixed_s_scalar_field_with_weights() {
 #[test]
 fn smoothn_tool_divergence_free_matches_the_library() {
     let dir = tempfile::tempdir().unwrap();
-    let (_, noisy) = noisy_field();
-    let (inp, out) = (dir.path().join("field.npy"), dir.path().join("df.npy"));
-    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    let (_, noisy, inp) = noisy_field_file(dir.path());
+    let out = dir.path().join("df.npy");
     let args = ["--in", inp.to_str().unwrap(), "--divergence-free", "--order", "3", "--robust"];
     let (code, stdout, stderr) =
         smoothn_cli(&[&args[..], &["--spacing", "2e-4,2e-4", "--out", out.to_str().unwrap()]].concat());
@@ -138,11 +142,10 @@ fn smoothn_tool_divergence_free_matches_the_library() {
 #[test]
 fn smoothn_tool_no_slip_matches_the_library() {
     let dir = tempfile::tempdir().unwrap();
-    let (_, noisy) = noisy_field();
+    let (_, noisy, inp) = noisy_field_file(dir.path());
     // power: a bright band over rows 8 ..= 21 (the "lumen"), 20 dB down elsewhere
     let power: Vec<f64> = (0..1200).map(|i| if (8..=21).contains(&(i / 40)) { 1.0 } else { 0.01 }).collect();
-    let (inp, pw, out) = (dir.path().join("field.npy"), dir.path().join("power.npy"), dir.path().join("ns.npy"));
-    npy::write_f64(&inp, &[2, 30, 40], &noisy).unwrap();
+    let (pw, out) = (dir.path().join("power.npy"), dir.path().join("ns.npy"));
     npy::write_f64(&pw, &[30, 40], &power).unwrap();
     let args = ["--in", inp.to_str().unwrap(), "--divergence-free", "--order", "3", "--robust", "--no-slip"];
     let (code, _, stderr) = smoothn_cli(

@@ -13,18 +13,14 @@
 # another heavy job is running.
 set -euo pipefail
 REPS=${1:-20}
-ROOT=$(cd "$(dirname "$0")/../.." && pwd)
-VENV=${PYMUST_VENV:-/tmp/pymust-venv}
-if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c "import pymust" 2>/dev/null; then
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install -q pymust==0.1.9
-fi
+# ROOT, VENV (pymust 0.1.9), pymust_blas_threads
+source "$(dirname "$0")/../pymust_env.sh"
 OUT=$(mktemp -d /tmp/beamform-sbs.XXXXXX)
 echo "== load: $(uptime)"
 echo "== Rust (cargo run --release -p sonoflow-doppler --example beamform_bench)"
 (cd "$ROOT" && cargo run --quiet --release -p sonoflow-doppler --example beamform_bench -- --reps "$REPS" --write "$OUT")
 echo "== PyMUST 0.1.9 (same data)"
-export OPENBLAS_NUM_THREADS=${PYMUST_THREADS:-1} OMP_NUM_THREADS=${PYMUST_THREADS:-1} MKL_NUM_THREADS=${PYMUST_THREADS:-1}
+pymust_blas_threads
 "$VENV/bin/python" - "$OUT" "$REPS" <<'PY'
 import json, sys, time
 import numpy as np

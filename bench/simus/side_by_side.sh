@@ -13,19 +13,15 @@
 set -euo pipefail
 N=${1:-26000}
 FRAMES=${2:-5}
-ROOT=$(cd "$(dirname "$0")/../.." && pwd)
-VENV=${PYMUST_VENV:-/tmp/pymust-venv}
-if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c "import pymust" 2>/dev/null; then
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install -q pymust==0.1.9
-fi
+# ROOT, VENV (pymust 0.1.9), pymust_blas_threads
+source "$(dirname "$0")/../pymust_env.sh"
 OUT=$(mktemp -d /tmp/simus-sbs.XXXXXX)
 echo "== load: $(uptime)"
 echo "== Rust (cargo run --release -p sonoflow-simus --example simus_bench)"
 (cd "$ROOT" && cargo run --quiet --release -p sonoflow-simus --example simus_bench -- \
     --scatterers "$N" --frames "$FRAMES" --write "$OUT")
 echo "== PyMUST 0.1.9 (same scatterers)"
-export OPENBLAS_NUM_THREADS=${PYMUST_THREADS:-1} OMP_NUM_THREADS=${PYMUST_THREADS:-1} MKL_NUM_THREADS=${PYMUST_THREADS:-1}
+pymust_blas_threads
 "$VENV/bin/python" - "$OUT" <<'EOF'
 import json, sys, time
 import numpy as np

@@ -52,6 +52,13 @@ pub fn run_graph(file: &str, out: &Path, extra: &[&str]) -> Output {
     out
 }
 
+/// [`run_graph`], asserting that the run succeeded (exit code 0; its log otherwise).
+pub fn run_graph_ok(file: &str, out: &Path, extra: &[&str]) -> Output {
+    let o = run_graph(file, out, extra);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
 /// A launcher running in the background, with its stderr lines collected.
 pub struct Launcher {
     pub child: Child,

@@ -1,12 +1,13 @@
 //! Test fixtures (feature `testkit`), shared by this crate's tests, `sonoflow-doppler`'s tests and
-//! the stability matrix: the PyMUST reference data (`tests/data`, with a small .npy reader that
-//! keeps complex128 values), nRMS, the paper probe's DAS parameters and SIMUS scenes. Test code:
-//! it panics on a missing data file or a failed simulation.
+//! the stability matrix and the cross-process tests: the PyMUST reference data (`tests/data`,
+//! complex128 values kept), nRMS, the paper probe's DAS parameters, SIMUS scenes, the −3 dB
+//! main-lobe centroid and the field an error names. Test code: it panics on a missing data file
+//! or a failed simulation.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
 
-use crate::{Complex, C32};
+use crate::{BeamformError, Complex, Grid, C32};
 
 /// Directory of the PyMUST reference data.
 pub fn data_dir() -> PathBuf {
@@ -30,42 +31,23 @@ impl Npy {
     }
 }
 
+/// Reads `name` from the reference data folder (real or complex, any order; through
+/// `sonoflow_fileio::npy`).
 pub fn read_npy(name: &str) -> Npy {
+    use sonoflow_fileio::npy;
     let path = data_dir().join(name);
-    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(&bytes[..6], b"\x93NUMPY", "not an npy file");
-    let (hlen, hstart) = if bytes[6] == 1 {
-        (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10)
-    } else {
-        (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
-    };
-    let header = std::str::from_utf8(&bytes[hstart..hstart + hlen]).unwrap();
-    assert!(header.contains("'fortran_order': False"), "{header}");
-    let descr = header.split("'descr':").nth(1).unwrap().split('\'').nth(1).unwrap();
-    let shape_txt = header.split("'shape':").nth(1).unwrap();
-    let shape_txt = &shape_txt[shape_txt.find('(').unwrap() + 1..shape_txt.find(')').unwrap()];
-    let shape: Vec<usize> =
-        shape_txt.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse().unwrap()).collect();
-    let body = &bytes[hstart + hlen..];
-    let f4 = |c: &[u8]| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
-    let f8 = |c: &[u8]| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
-    let (re, im) = match descr {
-        "<f4" => (body.chunks_exact(4).map(f4).collect(), None),
-        "<f8" => (body.chunks_exact(8).map(f8).collect(), None),
-        "<c8" => (
-            body.chunks_exact(8).map(|c| f4(&c[..4])).collect(),
-            Some(body.chunks_exact(8).map(|c| f4(&c[4..])).collect()),
-        ),
-        "<c16" => (
-            body.chunks_exact(16).map(|c| f8(&c[..8])).collect(),
-            Some(body.chunks_exact(16).map(|c| f8(&c[8..])).collect()),
-        ),
-        d => panic!("unsupported dtype {d}"),
-    };
-    let n: usize = shape.iter().product();
-    let re: Vec<f64> = re;
-    assert_eq!(re.len(), n);
-    Npy { shape, re, im }
+    match npy::read_complex(&path) {
+        Ok(a) => Npy {
+            shape: a.shape,
+            re: a.data.iter().map(|c| c.re).collect(),
+            im: Some(a.data.iter().map(|c| c.im).collect()),
+        },
+        Err(npy::NpyError::NotComplex { .. }) => {
+            let a = npy::read(&path).unwrap_or_else(|e| panic!("{e}"));
+            Npy { shape: a.shape, re: a.data, im: None }
+        }
+        Err(e) => panic!("{e}"),
+    }
 }
 
 pub fn reference_json() -> serde_json::Value {
@@ -120,10 +102,63 @@ impl RfSim {
         Self { simus, probe, plan, rf2iq }
     }
 
-    pub fn iq(&mut self, scat: &Scatterers, tx: &Transmit) -> Vec<C32> {
-        let n = self.plan.n_samples;
-        let mut rf = vec![0f32; self.probe.n_elements * n];
+    /// Element-major RF of `scat` for `tx` on the fixed plan.
+    pub fn rf(&mut self, scat: &Scatterers, tx: &Transmit) -> Vec<f32> {
+        let mut rf = vec![0f32; self.probe.n_elements * self.plan.n_samples];
         self.simus.simulate_into(scat, tx, &self.plan, &mut rf).unwrap();
-        self.rf2iq.process_to_vec(RfView::element_major(&rf, n, self.probe.n_elements)).unwrap()
+        rf
+    }
+
+    /// Demodulated element-major RF.
+    pub fn iq_of(&mut self, rf: &[f32]) -> Vec<C32> {
+        self.rf2iq.process_to_vec(RfView::element_major(rf, self.plan.n_samples, self.probe.n_elements)).unwrap()
+    }
+
+    /// Demodulated RF of `scat` for `tx`.
+    pub fn iq(&mut self, scat: &Scatterers, tx: &Transmit) -> Vec<C32> {
+        let rf = self.rf(scat, tx);
+        self.iq_of(&rf)
+    }
+}
+
+/// One point scatterer of reflection coefficient 1 at (x, z).
+pub fn one_scatterer(x: f64, z: f64) -> Scatterers {
+    Scatterers::new(vec![x as f32], vec![z as f32], vec![1.0]).unwrap()
+}
+
+/// Centroid (x, z) of |img|² over the pixels above half the peak intensity (−3 dB); None if that
+/// main lobe touches the grid border or the image is zero. The envelope of the 6-cycle pulse is
+/// flat-topped (pymust-notes §3), so its arg-max is not a position estimate; the centroid of the
+/// main lobe is, for a PSF symmetric about the scatterer.
+pub fn centroid(img: &[C32], g: &Grid) -> Option<(f64, f64)> {
+    let int: Vec<f64> = img.iter().map(|c| f64::from(c.norm_sqr())).collect();
+    let max = int.iter().copied().fold(0.0, f64::max);
+    let (mut sx, mut sz, mut sw) = (0.0, 0.0, 0.0);
+    for (i, v) in int.iter().enumerate() {
+        if *v >= 0.5 * max {
+            let (iz, ix) = (i / g.nx, i % g.nx);
+            if ix == 0 || ix + 1 == g.nx || iz == 0 || iz + 1 == g.nz {
+                return None;
+            }
+            sx += v * g.x(ix);
+            sz += v * g.z(iz);
+            sw += v;
+        }
+    }
+    (sw > 0.0).then(|| (sx / sw, sz / sw))
+}
+
+/// Every value finite.
+pub fn finite_c(v: &[C32]) -> bool {
+    v.iter().all(|c| c.re.is_finite() && c.im.is_finite())
+}
+
+/// The parameter field or buffer a beamforming error names.
+pub fn field_of(e: BeamformError) -> String {
+    match e {
+        BeamformError::InvalidParameter { field, .. }
+        | BeamformError::LengthMismatch { field, .. }
+        | BeamformError::BadDimension { field, .. } => field.to_string(),
+        BeamformError::ConfigMismatch { what } => what,
     }
 }

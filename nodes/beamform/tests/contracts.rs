@@ -1,17 +1,8 @@
 //! Errors of the beamforming stages on bad input (named fields, no panics).
 #![allow(clippy::unwrap_used)]
 
-use sonoflow_beamform::testkit::paper_das;
-use sonoflow_beamform::{BeamformError, DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
-
-fn field_of(e: BeamformError) -> String {
-    match e {
-        BeamformError::InvalidParameter { field, .. }
-        | BeamformError::LengthMismatch { field, .. }
-        | BeamformError::BadDimension { field, .. } => field.to_string(),
-        BeamformError::ConfigMismatch { what } => what,
-    }
-}
+use sonoflow_beamform::testkit::{field_of, paper_das};
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
 
 /// Bad parameters and buffers give errors naming the field; no panics.
 #[test]

@@ -5,8 +5,8 @@
 //! plane-wave transmit distance differs from PyMUST's discrete minimum by design (3e-4).
 #![allow(clippy::unwrap_used)]
 
-use sonoflow_beamform::testkit::{nrms_c, read_npy, reference_json};
-use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_beamform::testkit::{nrms_c, paper_das, read_npy, reference_json};
+use sonoflow_beamform::{DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
 
 fn rf() -> (Vec<f32>, usize, usize) {
     let a = read_npy("rf.npy");
@@ -74,21 +74,6 @@ fn grid() -> Grid {
     }
 }
 
-fn das_params(fnumber: f64, rx_angle: f64) -> DasParams {
-    DasParams {
-        fc: 5e6,
-        c: 1540.0,
-        fs: 20e6,
-        t0: 0.0,
-        pitch: 0.30e-3,
-        n_elements: 128,
-        fnumber,
-        rx_angle,
-        interpolation: Interpolation::Linear,
-        apodization: Default::default(),
-    }
-}
-
 /// dasmtx: the same image as PyMUST for 0° and 10° plane waves, full and F-number apertures, a
 /// diverging wave and (with PyMUST's line-557 bug patched) a +15° receive sub-aperture — which
 /// pins the sign of the receive angle. With the explicit delays (PyMUST's discrete rule), to
@@ -104,7 +89,7 @@ fn das_matches_pymust() {
         // PyMUST stores (nz, nx) from meshgrid(x, z): row-major iz·nx + ix, as ours.
         let fnumber = case["fnumber"].as_f64().unwrap();
         let rx = case["rx_angle"].as_f64().unwrap();
-        let p = das_params(fnumber, rx);
+        let p = paper_das(fnumber, rx, 20e6);
         let delays: Vec<f64> = case["delays"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let exact = DasPlan::new(&p, &TxWave::Delays { delays }, &g, ns).unwrap();
         let img = exact.apply_to_vec(&iq).unwrap();

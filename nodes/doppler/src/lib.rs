@@ -19,6 +19,8 @@ pub mod aperture;
 pub mod clutter;
 pub mod estimator;
 pub mod packet;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod vector;
 
 pub use aperture::{aperture_projection, Aperture};

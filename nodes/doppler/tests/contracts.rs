@@ -2,39 +2,13 @@
 //! clutter filter on synthetic data.
 #![allow(clippy::unwrap_used)]
 
-use sonoflow_beamform::testkit::paper_das;
+use sonoflow_beamform::testkit::{field_of, paper_das};
 use sonoflow_beamform::{BeamformError, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::testkit::{approaching_packet, degenerate_vector_solves, frame_refs, map_finite, phase_packet};
 use sonoflow_doppler::{
     flags, nominal_projection, solve_vector, solve_vector_weighted, ClutterFilter, DopplerEstimator, DopplerParams,
     Estimator, Packet, Projection, VectorField, VectorInput,
 };
-
-fn field_of(e: BeamformError) -> String {
-    match e {
-        BeamformError::InvalidParameter { field, .. }
-        | BeamformError::LengthMismatch { field, .. }
-        | BeamformError::BadDimension { field, .. } => field.to_string(),
-        BeamformError::ConfigMismatch { what } => what,
-    }
-}
-
-/// One pixel per case: a phase step per frame of `step` rad, or zeros.
-fn packet(steps: &[Option<f64>], nf: usize) -> Vec<Vec<C32>> {
-    (0..nf)
-        .map(|n| {
-            steps
-                .iter()
-                .map(|s| match s {
-                    Some(s) => {
-                        let ph = s * n as f64;
-                        C32::new(ph.cos() as f32, ph.sin() as f32)
-                    }
-                    None => C32::new(0.0, 0.0),
-                })
-                .collect()
-        })
-        .collect()
-}
 
 /// Zero signal gives "no estimate" with velocity 0 (never NaN); a phase step of ±0.95π per frame
 /// (|v| = 0.95 V_N) is flagged as aliasing; 0.5π is not; NaN input gives "no estimate".
@@ -44,16 +18,16 @@ fn packet(steps: &[Option<f64>], nf: usize) -> Vec<Vec<C32>> {
 fn doppler_flags_zero_signal_aliasing_and_sign() {
     let pi = std::f64::consts::PI;
     let steps = [None, Some(0.95 * pi), Some(-0.95 * pi), Some(0.5 * pi), Some(-0.5 * pi), Some(0.0)];
-    let mut frames = packet(&steps, 8);
+    let mut frames = phase_packet(&steps, 8);
     frames[3][5] = C32::new(f32::NAN, 0.0);
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let refs = frame_refs(&frames);
     for est in [Estimator::Autocorrelation, Estimator::Loupas] {
         let mut p = DopplerParams::new(5e6, 1540.0, 10e3);
         p.estimator = est;
         let vn = p.nyquist_velocity();
         let mut e = DopplerEstimator::new(p, steps.len(), 1, 1e-4).unwrap();
         let m = e.estimate_to_map(Packet::Frames(&refs)).unwrap();
-        assert!(m.velocity.iter().chain(&m.variance).chain(&m.power).all(|v| v.is_finite()));
+        assert!(map_finite(&m));
         assert_eq!(m.flags, vec![flags::NO_ESTIMATE, flags::ALIASING, flags::ALIASING, 0, 0, flags::NO_ESTIMATE]);
         assert_eq!(m.velocity[0], 0.0);
         assert_eq!(m.velocity[5], 0.0);
@@ -72,14 +46,8 @@ fn doppler_flags_zero_signal_aliasing_and_sign() {
 fn doppler_sign_toward_probe_from_delays() {
     let (fc, prf, c) = (5e6, 10e3, 1540.0);
     let v_true = 0.2; // toward the probe
-    let frames: Vec<Vec<C32>> = (0..16)
-        .map(|n| {
-            let tau = 20e-6 - 2.0 * v_true * n as f64 / prf / c;
-            let ph = -2.0 * std::f64::consts::PI * fc * tau;
-            vec![C32::new(ph.cos() as f32, ph.sin() as f32)]
-        })
-        .collect();
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let frames = approaching_packet(fc, prf, c, v_true, 16);
+    let refs = frame_refs(&frames);
     let mut e = DopplerEstimator::new(DopplerParams::new(fc, c, prf), 1, 1, 1e-4).unwrap();
     let m = e.estimate_to_map(Packet::Frames(&refs)).unwrap();
     assert!((f64::from(m.velocity[0]) - v_true).abs() < 1e-4, "{}", m.velocity[0]);
@@ -126,22 +94,9 @@ fn vector_solve_matches_eq20_and_steered_geometry() {
         }
     }
     // degenerate geometry (same angle twice) and flagged inputs → no estimate
-    let d = vec![0.1f32];
-    let ok = vec![0u8];
-    let bad = vec![flags::NO_ESTIMATE];
-    let same = [
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.1 } },
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.1 } },
-    ];
-    let mut f = VectorField::default();
-    solve_vector(&same, &mut f).unwrap();
-    assert_eq!((f.flags[0], f.vx[0], f.vz[0]), (flags::NO_ESTIMATE, 0.0, 0.0));
-    let one_bad = [
-        VectorInput { velocity: &d, flags: &bad, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: -0.2 } },
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.2 } },
-    ];
-    solve_vector(&one_bad, &mut f).unwrap();
-    assert_eq!(f.flags[0], flags::NO_ESTIMATE);
+    let [same, one_bad] = degenerate_vector_solves();
+    assert_eq!(same, (flags::NO_ESTIMATE, 0.0, 0.0));
+    assert_eq!(one_bad.0, flags::NO_ESTIMATE);
 }
 
 /// Weighted vector solve: equal weights reproduce `solve_vector` bit for bit; unequal weights

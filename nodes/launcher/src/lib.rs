@@ -13,6 +13,8 @@
 pub mod launch;
 pub mod report;
 pub mod supervise;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 
 pub use launch::{load, resolve, Overrides, ResolvedGraph};
 pub use report::{NodeOutcome, RunReport};

@@ -90,6 +90,8 @@
 mod error;
 mod reader;
 mod recover;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod topics;
 mod verify;
 mod writer;

@@ -1,9 +1,7 @@
 //! The queue between caller and writer thread is bounded in bytes and never drops.
 
-mod common;
-
-use common::{payload, read_all, simple_spec};
-use sonoflow_mcap_io::{OutMessage, RecorderWriter, WriterOptions};
+use sonoflow_mcap_io::testkit::{payload, read_all, writer_with_channel};
+use sonoflow_mcap_io::{OutMessage, WriterOptions};
 
 const MIB: usize = 1024 * 1024;
 
@@ -12,8 +10,7 @@ fn tiny_queue_blocks_the_caller_and_loses_nothing() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("bp.mcap");
     let opts = WriterOptions { queue_bytes: MIB, ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/big")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/big");
     let n = 50u32;
     for seq in 0..n {
         w.write(OutMessage {
@@ -52,8 +49,7 @@ fn queue_holds_several_small_messages_but_not_more_than_the_bound() {
     let path = dir.path().join("bp-small.mcap");
     let queue_bytes = 256 * 1024;
     let opts = WriterOptions { queue_bytes, chunk_size: 256 * 1024, ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/s")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/s");
     let n = 3000u32;
     for seq in 0..n {
         w.write(OutMessage {

@@ -1,10 +1,8 @@
 //! Error cases: no overwrite, not-an-MCAP, missing files, unknown channels.
 
-mod common;
-
 use std::{fs, io::ErrorKind};
 
-use common::simple_spec;
+use sonoflow_mcap_io::testkit::writer_with_channel;
 use sonoflow_mcap_io::{recover, ChannelId, McapIoError, McapReader, OutMessage, RecorderWriter, WriterOptions};
 
 #[test]
@@ -74,8 +72,7 @@ fn opening_a_missing_file_names_the_path() {
 fn writing_to_an_unknown_channel_fails() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("unknown.mcap");
-    let mut w = RecorderWriter::create(&path, WriterOptions::default()).expect("create");
-    let ch = w.add_channel(simple_spec("/a")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, WriterOptions::default(), "/a");
     for bad in [ChannelId(0), ChannelId(ch.0 + 1), ChannelId(u16::MAX)] {
         let r = w.write(OutMessage { channel: bad, sequence: 0, log_time: 0, publish_time: 0, data: vec![1] });
         assert!(matches!(r, Err(McapIoError::UnknownChannel(id)) if id == bad.0), "{r:?}");

@@ -1,12 +1,10 @@
 //! The open chunk is closed every `flush_interval`: what is on disk while the writer is still
 //! running is readable.
 
-mod common;
-
 use std::{fs, thread::sleep, time::Duration};
 
-use common::{assert_prefix, read_all, simple_spec, write_n};
-use sonoflow_mcap_io::{RecorderWriter, WriterOptions};
+use sonoflow_mcap_io::testkit::{assert_prefix, read_all, write_n, writer_with_channel};
+use sonoflow_mcap_io::WriterOptions;
 
 fn snapshot(src: &std::path::Path, dst: &std::path::Path) {
     // Copy the bytes as they are on disk right now, while the writer is still open.
@@ -21,8 +19,7 @@ fn flush_interval_puts_small_messages_on_disk() {
         flush_interval: Duration::from_millis(100),
         ..WriterOptions::default() // 4 MiB chunks: only the timer can close them here
     };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/slow")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/slow");
     let expected = write_n(&w, ch, "/slow", 5, 200);
     sleep(Duration::from_millis(600));
     assert!(w.stats().file_bytes > 0);
@@ -38,7 +35,7 @@ fn flush_interval_puts_small_messages_on_disk() {
     // More messages later, while the writer is still open.
     let more: Vec<_> = (5..8u32)
         .map(|seq| {
-            let data = common::payload(u64::from(seq) + 7, 200);
+            let data = sonoflow_mcap_io::testkit::payload(u64::from(seq) + 7, 200);
             let t = 1000 * (u64::from(seq) + 1);
             w.write(sonoflow_mcap_io::OutMessage {
                 channel: ch,
@@ -48,7 +45,13 @@ fn flush_interval_puts_small_messages_on_disk() {
                 data: data.clone(),
             })
             .expect("write");
-            common::Expected { topic: "/slow".into(), sequence: seq, log_time: t, publish_time: t + 1, data }
+            sonoflow_mcap_io::testkit::Expected {
+                topic: "/slow".into(),
+                sequence: seq,
+                log_time: t,
+                publish_time: t + 1,
+                data,
+            }
         })
         .collect();
     sleep(Duration::from_millis(600));
@@ -71,8 +74,7 @@ fn without_a_timer_flush_the_open_chunk_stays_in_memory() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("no-timer.mcap");
     let opts = WriterOptions { flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/slow")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/slow");
     write_n(&w, ch, "/slow", 5, 200);
     sleep(Duration::from_millis(300));
     let snap = dir.path().join("snap.mcap");

@@ -1,10 +1,8 @@
 //! Write → read round trips, ordering, filters, chunking and options.
 
-mod common;
-
 use std::{collections::BTreeMap, fs, time::Duration};
 
-use common::{payload, read_all, simple_spec, Expected};
+use sonoflow_mcap_io::testkit::{payload, read_all, simple_spec, writer_with_channel, Expected};
 use sonoflow_mcap_io::{ChannelSpec, Compression, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions};
 
 const RF_LEN: usize = 4 * 1024 * 1024;
@@ -152,8 +150,7 @@ fn out_of_order_log_times_come_back_sorted_with_ties_in_file_order() {
         chunk_size: 4096, // many chunks with overlapping time ranges
         ..WriterOptions::default()
     };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let a = w.add_channel(simple_spec("/a")).expect("a");
+    let (mut w, a) = writer_with_channel(&path, opts, "/a");
     let b = w.add_channel(simple_spec("/b")).expect("b");
     // log time = pseudo-random in 0..50 (lots of ties); sequence = write index.
     let n = 400u32;
@@ -189,8 +186,7 @@ fn message_larger_than_chunk_size_gets_its_own_chunk() {
         flush_interval: Duration::from_secs(3600),
         ..WriterOptions::default()
     };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/x")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/x");
     for (t, len) in [(1u64, 1024usize), (2, 3 * 1024 * 1024), (3, 1024), (4, 1024)] {
         w.write(OutMessage { channel: ch, sequence: t as u32, log_time: t, publish_time: t, data: payload(t, len) })
             .expect("write");
@@ -253,9 +249,8 @@ fn dropping_the_writer_finishes_the_file() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("drop.mcap");
     {
-        let mut w = RecorderWriter::create(&path, WriterOptions::default()).expect("create");
-        let ch = w.add_channel(simple_spec("/d")).expect("channel");
-        common::write_n(&w, ch, "/d", 10, 100);
+        let (w, ch) = writer_with_channel(&path, WriterOptions::default(), "/d");
+        sonoflow_mcap_io::testkit::write_n(&w, ch, "/d", 10, 100);
     }
     let (r, got) = read_all(&path);
     assert!(r.is_complete());
@@ -270,10 +265,10 @@ fn channel_without_schema() {
     let ch = w
         .add_channel(ChannelSpec { topic: "/log".into(), message_encoding: "text".into(), ..Default::default() })
         .expect("channel");
-    let expected = common::write_n(&w, ch, "/log", 3, 10);
+    let expected = sonoflow_mcap_io::testkit::write_n(&w, ch, "/log", 3, 10);
     w.finish().expect("finish");
     let (r, got) = read_all(&path);
-    assert_eq!(common::assert_prefix(&got, &expected), 3);
+    assert_eq!(sonoflow_mcap_io::testkit::assert_prefix(&got, &expected), 3);
     assert_eq!(got[0].schema_name, "");
     assert_eq!(r.topics()[0].schema_name, "");
     let bytes = fs::read(&path).expect("read");

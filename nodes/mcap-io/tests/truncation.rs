@@ -1,9 +1,6 @@
 //! Unfinished and damaged files: linear reading, `recover`, and a real `kill -9`.
 
-mod common;
-
 use std::{
-    collections::BTreeMap,
     fs,
     path::{Path, PathBuf},
     process::{Child, Command, Stdio},
@@ -11,8 +8,11 @@ use std::{
     time::{Duration, Instant},
 };
 
-use common::{assert_prefix, payload, read_all, simple_spec, write_n, Expected};
-use sonoflow_mcap_io::{recover, McapIoError, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions};
+use sonoflow_mcap_io::testkit::{
+    assert_prefix, finished_recording, payload, read_all, read_and_recover, write_n, writer_with_channel, Damaged,
+    Expected, FinishedRecording,
+};
+use sonoflow_mcap_io::{recover, McapIoError, McapReader, OutMessage, ReadOptions, WriterOptions};
 
 /// Checks that `recovered` is a finished file holding exactly `expected` (which it must read
 /// back in order), also by the mcap crate's strict readers.
@@ -36,8 +36,7 @@ fn abandoned_writer_leaves_a_readable_prefix() {
     let path = dir.path().join("abandoned.mcap");
     let opts =
         WriterOptions { chunk_size: 64 * 1024, flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let ch = w.add_channel(simple_spec("/a")).expect("channel");
+    let (w, ch) = writer_with_channel(&path, opts, "/a");
     let expected = write_n(&w, ch, "/a", 100, 10 * 1024);
     w.abandon().expect("abandon");
 
@@ -57,83 +56,37 @@ fn abandoned_writer_leaves_a_readable_prefix() {
     assert_recovered(&out, &expected[..n]);
 }
 
+/// The testkit's finished recording in a folder of its own.
 struct Finished {
     _dir: tempfile::TempDir,
-    path: PathBuf,
-    expected: Vec<Expected>,
-    bytes: Vec<u8>,
-    summary: mcap::Summary,
-    run_meta: BTreeMap<String, String>,
-    config: Vec<u8>,
+    rec: FinishedRecording,
+}
+
+impl std::ops::Deref for Finished {
+    type Target = FinishedRecording;
+    fn deref(&self) -> &FinishedRecording {
+        &self.rec
+    }
 }
 
 /// A finished file with two channels, many small chunks, and metadata + an attachment near the
 /// start.
 fn finished_file() -> Finished {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("full.mcap");
-    let opts =
-        WriterOptions { chunk_size: 64 * 1024, flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).expect("create");
-    let a = w.add_channel(simple_spec("/a")).expect("a");
-    let b = w.add_channel(simple_spec("/b")).expect("b");
-    let run_meta = BTreeMap::from([("seed".to_string(), "7".to_string())]);
-    let config = b"config bytes".to_vec();
-    let mut expected = Vec::new();
-    for seq in 0..60u32 {
-        if seq == 3 {
-            w.metadata("run", run_meta.clone()).expect("metadata");
-            w.attach("config", "text/plain", config.clone()).expect("attach");
-        }
-        let (ch, topic) = if seq % 2 == 0 { (a, "/a") } else { (b, "/b") };
-        let t = 1000 + u64::from(seq) * 10;
-        let data = payload(u64::from(seq), 20 * 1024);
-        expected.push(Expected {
-            topic: topic.into(),
-            sequence: seq,
-            log_time: t,
-            publish_time: t,
-            data: data.clone(),
-        });
-        w.write(OutMessage { channel: ch, sequence: seq, log_time: t, publish_time: t, data }).expect("write");
-    }
-    w.finish().expect("finish");
-    let bytes = fs::read(&path).expect("read");
-    let summary = mcap::Summary::read(&bytes).expect("summary").expect("some");
-    assert!(summary.chunk_indexes.len() >= 10);
-    Finished { _dir: dir, path, expected, bytes, summary, run_meta, config }
-}
-
-/// Number of messages in the chunks that end at or before `cut`.
-fn messages_before(f: &Finished, cut: u64) -> usize {
-    f.summary
-        .chunk_indexes
-        .iter()
-        .filter(|c| c.chunk_start_offset + c.chunk_length <= cut)
-        .map(|c| f.summary.stream_chunk(&f.bytes, c).expect("chunk").count())
-        .sum()
+    let rec = finished_recording(dir.path());
+    assert!(rec.summary.chunk_indexes.len() >= 10);
+    Finished { _dir: dir, rec }
 }
 
 /// Writes `bytes` to a new file, opens it, and checks the linear read and `recover`.
 fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize, want_extras: bool) {
-    let dir = f.path.parent().expect("dir");
-    let damaged = dir.join(format!("{name}.mcap"));
-    fs::write(&damaged, bytes).expect("write damaged");
-    let r = McapReader::open(&damaged).expect("open damaged");
+    let Damaged { reader: r, read: got, stats, recovered: out } = read_and_recover(f, name, bytes);
     assert!(!r.is_complete(), "{name}: must not be complete");
-    let got = r
-        .messages(&ReadOptions::default())
-        .expect("messages")
-        .collect::<Result<Vec<_>, _>>()
-        .unwrap_or_else(|e| panic!("{name}: linear read failed: {e}"));
     assert_eq!(assert_prefix(&got, &f.expected), want, "{name}: wrong number of messages");
     if want_extras {
         assert_eq!(r.metadata(), vec![("run".to_string(), f.run_meta.clone())]);
         assert_eq!(r.attachments().len(), 1, "{name}");
     }
-
-    let out = dir.join(format!("{name}-recovered.mcap"));
-    let stats = recover(&damaged, &out).unwrap_or_else(|e| panic!("{name}: recover: {e}"));
     assert_eq!(stats.messages, want as u64, "{name}");
     assert!(!stats.was_complete);
     assert_eq!(stats.truncated_bytes, r.truncated_bytes());
@@ -148,11 +101,9 @@ fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize, want_extra
 #[test]
 fn truncated_in_the_middle_of_the_last_chunk() {
     let f = finished_file();
-    let last = f.summary.chunk_indexes.last().expect("chunks");
-    let cut = last.chunk_start_offset + last.chunk_length / 2;
-    let want = messages_before(&f, cut);
+    let (bytes, want) = f.cut_in_last_chunk();
     assert!(want > 0 && want < f.expected.len());
-    check_damaged(&f, "cut-last-chunk", &f.bytes[..cut as usize], want, true);
+    check_damaged(&f, "cut-last-chunk", &bytes, want, true);
 }
 
 #[test]
@@ -160,7 +111,7 @@ fn truncated_in_the_middle_of_an_earlier_chunk() {
     let f = finished_file();
     let c = &f.summary.chunk_indexes[f.summary.chunk_indexes.len() / 2];
     let cut = c.chunk_start_offset + 20;
-    let want = messages_before(&f, cut);
+    let want = f.messages_before(cut);
     assert!(want > 0 && want < f.expected.len());
     check_damaged(&f, "cut-mid-chunk", &f.bytes[..cut as usize], want, true);
 }
@@ -181,28 +132,19 @@ fn truncated_in_the_summary_or_footer() {
 fn truncated_right_after_the_header() {
     let f = finished_file();
     // Magic (8) + the header record: no chunk survives.
-    let header_len = 8 + 9 + u64::from_le_bytes(f.bytes[9..17].try_into().expect("len"));
-    check_damaged(&f, "cut-header", &f.bytes[..header_len as usize + 5], 0, false);
+    check_damaged(&f, "cut-header", &f.bytes[..f.header_end() + 5], 0, false);
 }
 
 #[test]
 fn zeroed_or_corrupt_tail_stops_the_linear_read_cleanly() {
     let f = finished_file();
-    let last = f.summary.chunk_indexes.last().expect("chunks");
-    let want = messages_before(&f, last.chunk_start_offset);
 
     // A power loss can leave zeros where the last data should be.
-    let mut zeroed = f.bytes.clone();
-    zeroed[last.chunk_start_offset as usize..].fill(0);
+    let (zeroed, want) = f.zeroed_tail();
     check_damaged(&f, "zeroed-tail", &zeroed, want, true);
 
     // Damaged compressed bytes in the last chunk of an unfinished file: the chunk's CRC fails.
-    let end = (last.chunk_start_offset + last.chunk_length) as usize;
-    let mut corrupt = f.bytes[..end + 10].to_vec();
-    let mid = last.chunk_start_offset as usize + last.chunk_length as usize / 2;
-    for b in &mut corrupt[mid..mid + 64] {
-        *b ^= 0x5A;
-    }
+    let (corrupt, want) = f.corrupt_last_chunk();
     check_damaged(&f, "corrupt-last-chunk", &corrupt, want, true);
 }
 
@@ -248,8 +190,7 @@ fn kill9_child_writer() {
         flush_interval: KILL9_FLUSH,
         ..WriterOptions::default() // 4 MiB chunks: only the timer closes them
     };
-    let mut w = RecorderWriter::create(&dir.join("rec.mcap"), opts).expect("create");
-    let ch = w.add_channel(simple_spec("/k")).expect("channel");
+    let (w, ch) = writer_with_channel(&dir.join("rec.mcap"), opts, "/k");
     for seq in 0u32.. {
         let t = 1000 * (u64::from(seq) + 1);
         w.write(OutMessage {

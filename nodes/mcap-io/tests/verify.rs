@@ -1,11 +1,9 @@
 //! `McapReader::verify` (behind `sonoflow inspect --verify`) and `unfinished_note` (the replay
 //! node's warning).
 
-mod common;
-
 use std::{collections::BTreeMap, fs, path::Path, time::Duration};
 
-use common::{simple_spec, write_n};
+use sonoflow_mcap_io::testkit::{simple_spec, write_n};
 use sonoflow_mcap_io::{Compression, McapReader, MessageView, RecorderWriter, Verification, WriterOptions};
 
 fn opts(compression: Compression) -> WriterOptions {

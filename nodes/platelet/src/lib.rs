@@ -17,6 +17,8 @@ pub mod shape;
 pub mod spheroid;
 pub mod stokes;
 pub mod suspension;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 
 pub use coefficients::{CoefficientModel, Rotational, Translational};
 pub use shape::{Shape, ShapeError, ShapeSampler};

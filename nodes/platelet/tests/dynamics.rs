@@ -12,6 +12,7 @@ use sonoflow_platelet::dynamics::{
     CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsError, DynamicsParams, FlowError, FlowSample, Integrator,
     LatticeField, ParticleState, Particles, SimpleShear, DEFAULT_DENSITY,
 };
+use sonoflow_platelet::testkit::{one, FixedModel};
 use sonoflow_platelet::{CoefficientModel, Rotational, Shape, Translational};
 use std::f64::consts::{PI, TAU};
 
@@ -56,24 +57,6 @@ impl CoefficientModel for Sphere {
     }
 }
 
-/// A model returning a bad drag.
-struct BadDrag(f64);
-impl CoefficientModel for BadDrag {
-    fn translational(&self, _s: &[Shape], _psi: &[f64], out: &mut [Translational]) {
-        for o in out {
-            *o = Translational { c_d: self.0, c_l: 0.0, c_p: 0.0 };
-        }
-    }
-    fn rotational(&self, _s: &[Shape], out: &mut [Rotational]) {
-        for o in out {
-            *o = Rotational { c_r: 1e-19, c_s: 0.0 };
-        }
-    }
-    fn name(&self) -> &str {
-        "bad"
-    }
-}
-
 struct Uniform([f64; 2]);
 impl CarrierFlow for Uniform {
     fn sample(&self, _x: [f64; 2], _t: f64) -> FlowSample {
@@ -83,12 +66,6 @@ impl CarrierFlow for Uniform {
 
 fn params(sub_step: f64) -> DynamicsParams {
     DynamicsParams { sub_step, sub_steps: 1, coeff_every: 10, collisions: false, ..Default::default() }
-}
-
-fn one(shape: Shape, s: ParticleState) -> Particles {
-    let mut p = Particles::new(DEFAULT_DENSITY, 1.0).unwrap();
-    p.push(shape, s).unwrap();
-    p
 }
 
 /// Runs `n` sub-steps from t = 0; returns the state after each.
@@ -501,26 +478,14 @@ fn bad_inputs_give_clear_errors() {
 
     // bad model output
     for bad in [f64::NAN, 0.0, -1e-8] {
-        let e = d.macro_step(&mut p, &flow, &BadDrag(bad), 0.0).unwrap_err();
+        let e = d.macro_step(&mut p, &flow, &FixedModel::drag(bad), 0.0).unwrap_err();
         assert!(matches!(e, DynamicsError::Coefficient { field: "c_d", index: 0, .. }), "{e}");
     }
     // coupling with a pitching torque that breaks positive definiteness
-    struct Pitchy;
-    impl CoefficientModel for Pitchy {
-        fn translational(&self, _s: &[Shape], _p: &[f64], out: &mut [Translational]) {
-            out.fill(Translational { c_d: 7e-8, c_l: 0.0, c_p: 1e-12 });
-        }
-        fn rotational(&self, _s: &[Shape], out: &mut [Rotational]) {
-            out.fill(Rotational { c_r: 1e-19, c_s: 0.0 });
-        }
-        fn name(&self) -> &str {
-            "pitchy"
-        }
-    }
     let mut dc = Dynamics::new(DynamicsParams { coupling: true, ..Default::default() }).unwrap();
     let mut pc = Particles::new(DEFAULT_DENSITY, 1.0).unwrap();
     pc.push(Shape::default(), ParticleState::default()).unwrap();
-    let e = dc.macro_step(&mut pc, &flow, &Pitchy, 0.0).unwrap_err();
+    let e = dc.macro_step(&mut pc, &flow, &FixedModel::pitchy(), 0.0).unwrap_err();
     assert!(e.to_string().contains("c_x^2 < c_d c_r"), "{e}");
 
     // flows

@@ -1,15 +1,11 @@
 //! Paper 2 §5.1 with the shipped networks: the five test particles in the paper's channel.
 use sonoflow_platelet::dynamics::DynamicsParams;
 use sonoflow_platelet::experiments::{curves, jeffery_period, rotation_period, run, RunOptions, Y0};
-use sonoflow_platelet::nn::model::NetworkModel;
-
-fn model() -> NetworkModel {
-    NetworkModel::load_dir(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("weights")).expect("shipped weights")
-}
+use sonoflow_platelet::testkit::shipped_model;
 
 #[test]
 fn five_particles_follow_their_streamline_in_jeffery_orbits() {
-    let m = model();
+    let m = shipped_model();
     let b = curves(&m, 4).jeffery_b;
     let tr = run(&m, &RunOptions { t_end: 30.0, record_every: 40, dynamics: DynamicsParams::default() }).expect("run");
     // γ̇ at y0 = 0.5176 mm of the paper's profile: 2 v_in (1 − 2 y0/H)/H
@@ -36,7 +32,7 @@ fn five_particles_follow_their_streamline_in_jeffery_orbits() {
 
 #[test]
 fn with_the_coupling_asymmetric_particles_oscillate_without_drift() {
-    let m = model();
+    let m = shipped_model();
     let params = DynamicsParams { coupling: true, ..DynamicsParams::default() };
     let tr = run(&m, &RunOptions { t_end: 30.0, record_every: 40, dynamics: params }).expect("run");
     let range = |k: usize| {

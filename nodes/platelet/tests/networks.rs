@@ -5,6 +5,7 @@
 use std::f64::consts::PI;
 
 use sonoflow_platelet::nn::model::{translational_from_si, NetworkModel};
+use sonoflow_platelet::testkit::shipped_model;
 use sonoflow_platelet::{solve_shape, CoefficientModel, Rotational, Shape, StokesOptions, Translational};
 
 /// Table 2 (µm): Lx, Ly, Lz, α_top, α_bot.
@@ -18,11 +19,6 @@ const TABLE2: [[f64; 5]; 5] = [
 
 /// RMS of eq 18's t_p over the test shapes of the shipped data (training report).
 const T_P_RMS: f64 = 0.334;
-
-fn model() -> NetworkModel {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("weights");
-    NetworkModel::load_dir(&dir).expect("the shipped weights load")
-}
 
 /// (ψ grid, D, L, T per particle) in paper units from the networks.
 fn curves(m: &NetworkModel, n: usize) -> (Vec<f64>, Vec<[Vec<f64>; 3]>) {
@@ -45,7 +41,7 @@ fn argmax(v: &[f64]) -> usize {
 
 #[test]
 fn networks_match_the_stokes_solver_on_the_five_test_particles() {
-    let m = model();
+    let m = shipped_model();
     let psi = [0.3, 1.0, 2.0, 4.0];
     for p in TABLE2 {
         let s = Shape::from_um(p[0], p[1], p[2], p[3], p[4]);
@@ -73,7 +69,7 @@ fn networks_match_the_stokes_solver_on_the_five_test_particles() {
 
 #[test]
 fn five_particle_curves_have_the_papers_features() {
-    let m = model();
+    let m = shipped_model();
     let n = 360;
     let (psi, c) = curves(&m, n);
     let near = |k: usize, target: f64| {

@@ -102,6 +102,8 @@ mod nearest;
 mod params;
 pub mod robust;
 mod smoothn;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 
 pub use crate::divfree::{
     wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,

@@ -2,8 +2,7 @@
 //! `(W + S L^m) z = W y`, `L` the N-D Neumann Laplacian scaled by the normalised spacing. These tests
 //! build that system densely (independently of the DCT) and compare.
 #![allow(clippy::unwrap_used, clippy::needless_range_loop)] // test helpers; dense linear algebra by index
-mod common;
-use common::*;
+use sonoflow_regularise::testkit::*;
 use sonoflow_regularise::{smoothn, SmoothnParams};
 
 /// Dense N-D Neumann Laplacian `Σ_a L_a / dI_a²` (row-major grid), `L_a = tridiag(−1, 2, −1)` with

@@ -1,12 +1,7 @@
 //! Extreme inputs, errors, parameters, workspace reuse and thread-count determinism.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
-mod common;
-use common::*;
+use sonoflow_regularise::testkit::*;
 use sonoflow_regularise::{smoothn, Smoothn, SmoothnError, SmoothnParams, WeightFunction};
-
-fn robust_auto() -> SmoothnParams {
-    SmoothnParams { robust: true, ..SmoothnParams::default() }
-}
 
 #[test]
 fn all_nan_input_is_a_clear_error() {
@@ -32,15 +27,7 @@ fn all_nan_input_is_a_clear_error() {
 
 #[test]
 fn infinities_are_treated_exactly_like_nan() {
-    let truth = smooth_field(16, 20);
-    let (mut y_nan, _) = corrupt(&truth, 2, 0.05, 0.0, 1);
-    let mut y_inf = y_nan.clone();
-    for (k, p) in [3usize, 77, 150, 151, 300].iter().enumerate() {
-        y_nan[*p] = f64::NAN;
-        y_inf[*p] = if k % 2 == 0 { f64::INFINITY } else { f64::NEG_INFINITY };
-    }
-    let (a, ra) = smoothn(&y_nan, &[16, 20], 2, None, &robust_auto()).unwrap();
-    let (b, rb) = smoothn(&y_inf, &[16, 20], 2, None, &robust_auto()).unwrap();
+    let [(a, ra), (b, rb)] = nan_and_infinity_runs();
     assert_eq!(a, b);
     assert_eq!(ra, rb);
     assert!(a.iter().all(|v| v.is_finite()));

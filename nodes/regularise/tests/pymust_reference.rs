@@ -7,9 +7,8 @@
 //!   reproduces PyMUST to rounding, which accounts for the whole difference, and the default
 //!   (MATLAB) flavour differs by the sizes recorded below.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
-mod common;
-use common::*;
 use serde_json::Value;
+use sonoflow_regularise::testkit::*;
 use sonoflow_regularise::{smoothn, Flavour, SmoothnParams, SmoothnReport};
 use std::path::PathBuf;
 

@@ -1,7 +1,6 @@
 //! Accuracy on corrupted fields: gross outliers (robust mode) and missing values.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
-mod common;
-use common::*;
+use sonoflow_regularise::testkit::*;
 use sonoflow_regularise::{smoothn, SmoothnParams, WeightFunction};
 
 const NY: usize = 64;
@@ -9,16 +8,12 @@ const NX: usize = 64;
 
 #[test]
 fn robust_mode_recovers_a_smooth_field_from_noise_and_10pc_gross_outliers() {
-    let truth = smooth_field(NY, NX);
-    let (y, mask) = corrupt(&truth, 2, 0.1, 0.1, 11);
+    // References: the same noise without outliers, smoothed non-robustly (the best one can hope
+    // for), and the corrupted field smoothed non-robustly.
+    let OutlierScene { truth, y, mask, e_clean, e_plain, plain } = outlier_scene(11);
+    assert_eq!([NY, NX], OUTLIER_GRID);
     let true_fraction = mask.iter().filter(|m| **m).count() as f64 / mask.len() as f64;
-    // Reference: the same noise without outliers, smoothed non-robustly (the best one can hope for).
-    let (clean, _) = corrupt(&truth, 2, 0.1, 0.0, 11);
-    let (zc, _) = smoothn(&clean, &[NY, NX], 2, None, &SmoothnParams::default()).unwrap();
-    let e_clean = rms_diff(&zc, &truth);
-    let (z0, r0) = smoothn(&y, &[NY, NX], 2, None, &SmoothnParams::default()).unwrap();
-    let e_plain = rms_diff(&z0, &truth);
-    assert_eq!(r0.outlier_fraction, 0.0, "non-robust smoothing flags no outliers");
+    assert_eq!(plain.outlier_fraction, 0.0, "non-robust smoothing flags no outliers");
     // Measured (seed 11): plain 0.092, robust bisquare 0.020, Talworth 0.020, Cauchy 0.027, outlier-free 0.019.
     // Cauchy weights never reach 0, so outliers leak more; bound 0.4 for it, 0.3 for the others.
     for (wf, ratio) in [(WeightFunction::Bisquare, 0.3), (WeightFunction::Talworth, 0.3), (WeightFunction::Cauchy, 0.4)]

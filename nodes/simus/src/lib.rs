@@ -64,6 +64,8 @@ pub mod pulse;
 pub mod scan;
 mod scatterers;
 mod simus;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 mod transmit;
 
 pub use error::{Result, SimusError};

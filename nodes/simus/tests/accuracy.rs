@@ -4,9 +4,7 @@
 //! Run with `--nocapture` to print the error table (the numbers quoted in BENCHMARKS.md).
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
-mod common;
-
-use common::load_scene;
+use sonoflow_simus::testkit::load_scene;
 use sonoflow_simus::{nrms, Accuracy, KernelChoice, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
 fn random_scene(n: usize, seed: u64) -> Scatterers {

@@ -1,42 +1,21 @@
 //! Extreme cases: each has a clear outcome, a finite RF or a clear error.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
-mod common;
-
-use common::{envelope_centroid, linear_engine};
+use sonoflow_simus::testkit::{
+    all_finite, grazing_angles, linear_engine, many_scatterers, one, paper_engine as engine, peak, pw0,
+    random_scatterers, scatterer_on_array_face, very_deep_scatterer, zero_scatterers,
+};
 use sonoflow_simus::{nrms, Accuracy, Medium, Probe, Scatterers, Simus, SimusError, SimusOptions, Transmit};
-
-fn engine() -> Simus {
-    Simus::new(Probe::paper_5mhz(), Medium::default(), SimusOptions::default()).unwrap()
-}
-
-fn pw0(p: &Probe) -> Transmit {
-    Transmit::plane_wave(p, 1540.0, 0.0).unwrap()
-}
-
-fn all_finite(v: &[f32]) -> bool {
-    v.iter().all(|x| x.is_finite())
-}
-
-fn peak(v: &[f32]) -> f32 {
-    v.iter().fold(0.0f32, |m, x| m.max(x.abs()))
-}
 
 /// On the array face (z = 0) at an element centre and at a sub-element centre (d = 0): r is
 /// clamped to λ/2 and |θ| = 90° gives MUST's obliquity floor, so the echo is finite and weaker
 /// than that of the same scatterer λ/2 in front of the element.
 #[test]
 fn scatterer_on_the_array_face() {
-    let p = Probe::paper_5mhz();
-    let mut simus = engine();
-    let xe = p.element_x(40) as f32;
-    let sub = (p.element_x(40) - p.element_width() / 4.0) as f32; // sub-element 0 of 2
-    let front = simus.simulate(&Scatterers::new(vec![xe], vec![1540.0 / 5e6 / 2.0], vec![1.0]).unwrap(), &pw0(&p));
-    let front = front.unwrap();
-    for x in [xe, sub] {
-        let rf = simus.simulate(&Scatterers::new(vec![x], vec![0.0], vec![1.0]).unwrap(), &pw0(&p)).unwrap();
-        assert!(all_finite(&rf.data));
-        assert!(peak(&rf.data) <= peak(&front.data), "{} > {}", peak(&rf.data), peak(&front.data));
+    let face = scatterer_on_array_face();
+    assert!(face.finite);
+    for p in face.face_peaks {
+        assert!(p <= face.front_peak, "{p} > {}", face.front_peak);
     }
 }
 
@@ -50,10 +29,8 @@ fn scatterer_exactly_on_an_element_axis() {
     let xe = p.element_x(64) as f32;
     let mut a = vec![0f32; p.n_elements * plan.n_samples];
     let mut b = a.clone();
-    simus.simulate_into(&Scatterers::new(vec![xe], vec![0.01], vec![1.0]).unwrap(), &pw0(&p), &plan, &mut a).unwrap();
-    simus
-        .simulate_into(&Scatterers::new(vec![xe + 1e-6], vec![0.01], vec![1.0]).unwrap(), &pw0(&p), &plan, &mut b)
-        .unwrap();
+    simus.simulate_into(&one(xe, 0.01), &pw0(&p), &plan, &mut a).unwrap();
+    simus.simulate_into(&one(xe + 1e-6, 0.01), &pw0(&p), &plan, &mut b).unwrap();
     assert!(all_finite(&a) && peak(&a) > 0.0);
     // a 1 µm shift moves the echoes by < 1e-6 m of path: relative change ~ k·1e-6·(x/r) < 1e-2
     let e = nrms(&b, &a);
@@ -63,60 +40,32 @@ fn scatterer_exactly_on_an_element_axis() {
 /// Grazing angles (|θ| → 90°): scatterers just below the face, inside and far outside the
 /// aperture. Finite, and far weaker than a scatterer in front of the array at the same range.
 #[test]
-fn grazing_angles() {
-    let p = Probe::paper_5mhz();
-    let mut simus = engine();
-    let rf = simus
-        .simulate(&Scatterers::new(vec![0.03, -0.004, 0.05], vec![1e-6, 1e-9, 1e-4], vec![1.0; 3]).unwrap(), &pw0(&p))
-        .unwrap();
-    assert!(all_finite(&rf.data));
-    let front = simus.simulate(&Scatterers::new(vec![0.0], vec![0.03], vec![1.0]).unwrap(), &pw0(&p)).unwrap();
-    assert!(peak(&rf.data) < 0.1 * peak(&front.data));
+fn grazing_angles_are_finite_and_weak() {
+    let (finite, ratio) = grazing_angles();
+    assert!(finite);
+    assert!(ratio < 0.1, "{ratio}");
 }
 
 /// Very deep (30 cm, 8-element probe to keep it fast): the grid grows (Nf ∝ depth) and the
 /// echo still arrives at (z + d)/c; windowed centroid, within 0.1 sample.
 #[test]
-fn very_deep_scatterer() {
-    let p = Probe { n_elements: 8, ..Probe::paper_5mhz() };
-    let m = Medium::default();
-    let mut simus = linear_engine(&p, &m, SimusOptions { db_thresh: -40.0, ..SimusOptions::default() });
-    let z = 0.3f32;
-    let rf = simus.simulate(&Scatterers::new(vec![0.0], vec![z], vec![1.0]).unwrap(), &pw0(&p)).unwrap();
-    assert!(all_finite(&rf.data));
-    assert!(rf.plan.n_freq > 3000, "{}", rf.plan.n_freq);
-    let d = p.element_x(3).hypot(f64::from(z));
-    let want = (f64::from(z) + d) / m.c;
-    let err = (envelope_centroid(rf.element(3), rf.fs, rf.t0, want, 2.5e-6) - want) * rf.fs;
-    assert!(err.abs() < 0.1, "{err}");
+fn very_deep_scatterer_arrives_on_time() {
+    let deep = very_deep_scatterer();
+    assert!(deep.finite);
+    assert!(deep.n_freq > 3000, "{}", deep.n_freq);
+    assert!(deep.arrival_error.abs() < 0.1, "{}", deep.arrival_error);
 }
 
 /// No scatterers: an all-zero RF of the planned length (the plan covers the pulse only), not
 /// an error.
 #[test]
 fn zero_scatterers_give_zero_rf_of_planned_length() {
-    let p = Probe::paper_5mhz();
-    let mut simus = engine();
-    let rf = simus.simulate(&Scatterers::default(), &pw0(&p)).unwrap();
-    let plan = simus.plan_for_max_distance(0.0, 0.0).unwrap();
-    assert_eq!(rf.plan, plan);
-    assert_eq!(rf.data.len(), p.n_elements * plan.n_samples);
-    assert!(rf.n_samples > 0 && rf.data.iter().all(|v| *v == 0.0));
+    let z = zero_scatterers();
+    assert_eq!(z.rf.plan, z.plan);
+    assert_eq!(z.rf.data.len(), z.n_elements * z.plan.n_samples);
+    assert!(z.rf.n_samples > 0 && z.rf.data.iter().all(|v| *v == 0.0));
     // with a fixed plan too
-    let plan = simus.plan_for_max_distance(0.05, 0.0).unwrap();
-    let mut out = vec![1f32; p.n_elements * plan.n_samples];
-    simus.simulate_into(&Scatterers::default(), &pw0(&p), &plan, &mut out).unwrap();
-    assert!(out.iter().all(|v| *v == 0.0));
-}
-
-fn many(n: usize) -> Scatterers {
-    use rand::{Rng, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
-    let mut s = Scatterers::default();
-    for _ in 0..n {
-        s.push(rng.gen_range(-0.01f32..0.01), rng.gen_range(0.005f32..0.02), rng.gen_range(-1f32..1.0));
-    }
-    s
+    assert!(z.fixed_plan_out.iter().all(|v| *v == 0.0));
 }
 
 /// Streaming over scatterer blocks: 20 000 scatterers in blocks of 7 (not a multiple of the
@@ -128,7 +77,7 @@ fn many(n: usize) -> Scatterers {
 #[test]
 fn streaming_blocks_give_the_same_rf() {
     let p = Probe { n_elements: 16, ..Probe::paper_5mhz() };
-    let s = many(20_000);
+    let s = random_scatterers(20_000, 99);
     let run = |block: u32| {
         let o = SimusOptions {
             db_thresh: -20.0,
@@ -144,26 +93,15 @@ fn streaming_blocks_give_the_same_rf() {
     assert!(e2 < 2e-5, "{e2:e}");
 }
 
-fn vm_hwm_kib() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse().ok()
-}
-
 /// 10⁶ scatterers (8 elements, −20 dB band: ~1 s in release): finite RF and a peak-memory
 /// increase far below one (scatterers × elements × bins) array (10⁶ × 8 × 200 × 8 B = 12.8 GB);
 /// the engine streams blocks of 256 scatterers.
 #[test]
 fn one_million_scatterers_memory_bounded() {
-    let p = Probe { n_elements: 8, ..Probe::paper_5mhz() };
-    let s = many(1_000_000);
-    let before = vm_hwm_kib();
-    let o = SimusOptions { db_thresh: -20.0, ..SimusOptions::default() };
-    let mut simus = Simus::new(p.clone(), Medium::default(), o).unwrap();
-    let rf = simus.simulate(&s, &pw0(&p)).unwrap();
-    assert!(all_finite(&rf.data) && peak(&rf.data) > 0.0);
-    if let (Some(a), Some(b)) = (before, vm_hwm_kib()) {
-        assert!(b.saturating_sub(a) < 200 * 1024, "peak memory grew by {} MiB", (b - a) / 1024);
+    let m = many_scatterers(1_000_000);
+    assert!(m.finite && m.peak > 0.0);
+    if let Some(grew) = m.memory_growth_mib {
+        assert!(grew < 200, "peak memory grew by {grew} MiB");
     }
 }
 
@@ -171,24 +109,24 @@ fn one_million_scatterers_memory_bounded() {
 fn non_finite_scatterer_is_an_error_naming_the_row() {
     let p = Probe::paper_5mhz();
     let mut simus = engine();
-    let mut s = many(10);
+    let mut s = random_scatterers(10, 99);
     s.x[3] = f32::NAN;
     match simus.simulate(&s, &pw0(&p)) {
         Err(SimusError::InvalidScatterer { row: 3, field: "x", .. }) => {}
         other => panic!("{other:?}"),
     }
-    let mut s = many(10);
+    let mut s = random_scatterers(10, 99);
     s.rc[7] = f32::INFINITY;
     let e = simus.simulate(&s, &pw0(&p)).unwrap_err();
     assert!(matches!(e, SimusError::InvalidScatterer { row: 7, field: "rc", .. }), "{e}");
     assert!(e.to_string().contains("row 7"), "{e}");
-    let mut s = many(10);
+    let mut s = random_scatterers(10, 99);
     s.z[0] = f32::NEG_INFINITY;
     let plan = simus.plan_for_max_distance(0.05, 0.0).unwrap();
     let mut out = vec![0f32; p.n_elements * plan.n_samples];
     let e = simus.simulate_into(&s, &pw0(&p), &plan, &mut out).unwrap_err();
     assert!(matches!(e, SimusError::InvalidScatterer { row: 0, field: "z", .. }), "{e}");
-    let mut s = many(10);
+    let mut s = random_scatterers(10, 99);
     s.z[2] = 1e4; // finite but absurd: 10 km
     assert!(matches!(simus.simulate(&s, &pw0(&p)), Err(SimusError::InvalidScatterer { row: 2, .. })));
 }
@@ -210,7 +148,7 @@ fn bad_sampling_or_bandwidth_is_an_error_naming_the_field() {
 fn inconsistent_inputs_are_errors() {
     let p = Probe::paper_5mhz();
     let mut simus = engine();
-    let s = many(5);
+    let s = random_scatterers(5, 99);
     // transmit of the wrong length, negative delay
     let e = simus.simulate(&s, &Transmit::zero(3)).unwrap_err();
     assert!(matches!(e, SimusError::LengthMismatch { field: "transmit.delays", got: 3, expected: 128 }), "{e}");
@@ -225,7 +163,7 @@ fn inconsistent_inputs_are_errors() {
     let mut out = vec![0f32; 10];
     assert!(matches!(simus.simulate_into(&s, &pw0(&p), &plan, &mut out), Err(SimusError::OutputLength { .. })));
     let mut out = vec![0f32; p.n_elements * plan.n_samples];
-    let deep = Scatterers::new(vec![0.0], vec![0.1], vec![1.0]).unwrap();
+    let deep = one(0.0, 0.1);
     let e = simus.simulate_into(&deep, &pw0(&p), &plan, &mut out).unwrap_err();
     assert!(matches!(e, SimusError::PlanTooShort { .. }), "{e}");
     let other = Simus::new(Probe::preset("L11-5v").unwrap(), Medium::default(), SimusOptions::default()).unwrap();

@@ -2,17 +2,11 @@
 //! attenuation slope, reciprocity, plane-wave tilt.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
-mod common;
-
-use common::{envelope_centroid, linear_engine, single_element_transmit};
+use sonoflow_simus::testkit::{envelope_centroid, linear_engine, one, single_element_transmit};
 use sonoflow_simus::{nrms, Baffle, Medium, Probe, Scatterers, SimusOptions, Transmit};
 
 /// Half-width of the window for echo centroids (s): the two-way pulse lasts 2.9 µs.
 const W: f64 = 2.5e-6;
-
-fn one(x: f32, z: f32) -> Scatterers {
-    Scatterers::new(vec![x], vec![z], vec![1.0]).unwrap()
-}
 
 fn element_rf(data: &[f32], n_samples: usize, e: usize) -> &[f32] {
     &data[e * n_samples..(e + 1) * n_samples]

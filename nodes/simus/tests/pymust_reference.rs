@@ -12,12 +12,10 @@
 //! margin while still catching modelling errors (see `modelling_changes_are_detected`).
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
-mod common;
-
-use common::{load_scene, scene_names};
+use sonoflow_simus::testkit::{load_scene, scene_names, Scene};
 use sonoflow_simus::{nrms, Accuracy, Simus, SimusOptions};
 
-fn run(scene: &common::Scene, options: SimusOptions) -> (Vec<f32>, sonoflow_simus::FrequencyPlan) {
+fn run(scene: &Scene, options: SimusOptions) -> (Vec<f32>, sonoflow_simus::FrequencyPlan) {
     let mut simus = Simus::new(scene.probe.clone(), scene.medium.clone(), options).unwrap();
     let rf = simus.simulate(&scene.scatterers, &scene.transmit).unwrap();
     (rf.data, rf.plan)

@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release -p sonoflow-sph --example open_channel -- [u_mean] [t_end] [c]`
 use sonoflow_sph::setup::OpenChannelConfig;
-use sonoflow_sph::{ProfileKind, Real, Solver, SphParams, WaveformSpec};
+use sonoflow_sph::{Real, Solver, WaveformSpec};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a: Vec<String> = std::env::args().skip(1).collect();
@@ -11,20 +11,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(a.get(i).map(|s| s.parse::<Real>()).transpose()?.unwrap_or(d))
     };
     let (u_mean, t_end, c) = (get(0, 0.02)?, get(1, 0.2)?, get(2, 0.5)?);
-    let cfg = OpenChannelConfig {
-        width: 2e-3,
-        n_across: 20,
-        n_along: 40,
-        wall_layers: 3,
-        reservoir_columns: 4,
-        rho0: 1000.0,
-        nu: 4e-6,
-        inflow: WaveformSpec::Constant { value: u_mean }.build()?,
-        profile: ProfileKind::Womersley,
-        developed: true,
-    };
+    // the validation channel of the tests (L = 2 mm, 20 across, 4 mm between the openings)
+    let cfg = OpenChannelConfig::validation(WaveformSpec::Constant { value: u_mean }.build()?, true);
     let dx = cfg.dx();
-    let params = SphParams { h: 1.2 * dx, rho0: 1000.0, c, mu: 4e-3, dt_max: 1.0, ..Default::default() };
+    let params = cfg.solver_params(c);
     let (p, bs) = cfg.build();
     let mut s = Solver::new(params, p, 0.0)?.with_open_boundaries(bs)?;
     for k in 1..=10 {

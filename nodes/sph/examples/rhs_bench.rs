@@ -17,20 +17,12 @@ use std::time::Instant;
 
 use sonoflow_sph::fast::{self, FastWorkspace};
 use sonoflow_sph::setup::ChannelConfig;
+use sonoflow_sph::testkit::splitmix;
 use sonoflow_sph::wcsph::{compute_rates, Workspace};
 use sonoflow_sph::{CellList, Kernel, ParticleKind, Particles, Period, Real, SphParams};
 
 const DX: Real = 0.15e-3;
 const RHO0: Real = 1000.0;
-
-fn rnd(seed: &mut u64) -> Real {
-    *seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *seed;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    2.0 * ((z >> 11) as Real / (1u64 << 53) as Real) - 1.0
-}
 
 /// ±5 % jitter, a flow of 0.3 m/s with ±1 % noise, densities ±0.1 %.
 fn disorder(p: &mut Particles, width: Real) {
@@ -39,12 +31,12 @@ fn disorder(p: &mut Particles, width: Real) {
         if p.kind[i].is_wall() {
             continue;
         }
-        p.x[i] += 0.05 * DX * rnd(&mut s);
-        p.z[i] += 0.05 * DX * rnd(&mut s);
+        p.x[i] += 0.05 * DX * splitmix(&mut s);
+        p.z[i] += 0.05 * DX * splitmix(&mut s);
         let zeta = (p.z[i] / width).clamp(0.0, 1.0);
-        p.vx[i] = 0.3 * 4.0 * zeta * (1.0 - zeta) + 3e-3 * rnd(&mut s);
-        p.vz[i] = 3e-3 * rnd(&mut s);
-        p.rho[i] = RHO0 * (1.0 + 1e-3 * rnd(&mut s));
+        p.vx[i] = 0.3 * 4.0 * zeta * (1.0 - zeta) + 3e-3 * splitmix(&mut s);
+        p.vz[i] = 3e-3 * splitmix(&mut s);
+        p.rho[i] = RHO0 * (1.0 + 1e-3 * splitmix(&mut s));
     }
 }
 

@@ -38,6 +38,8 @@ pub mod producer;
 pub mod setup;
 pub mod solver;
 mod step;
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod walls;
 pub mod waveform;
 pub mod wcsph;

@@ -3,29 +3,18 @@
 
 use sonoflow_sph::analytic::{couette, poiseuille};
 use sonoflow_sph::setup::ChannelConfig;
-use sonoflow_sph::{BlowUpCriterion, DtCriterion, KernelKind, Period, Real, Solver, SphError, SphParams, ViscousTerm};
+use sonoflow_sph::testkit::{far_too_small_c, plate_channel};
+use sonoflow_sph::{BlowUpCriterion, DtCriterion, Real, Solver, SphError, SphParams, ViscousTerm};
 
 const L: Real = 1e-3;
 const NU: Real = 1e-6;
 const F: Real = 2e-4;
-const RHO0: Real = 1000.0;
 
+/// The plate channel of the testkit (L = 1 mm, ν = 1e-6 m²/s, c = 1e-2 m/s), driven by the body
+/// force F when the top plate is at rest (Poiseuille), else by the plate (Couette).
 fn channel(n_across: usize, top: Real) -> (ChannelConfig, SphParams) {
-    let cfg = ChannelConfig { width: L, n_across, n_along: 12, wall_layers: 3, rho0: RHO0, top_wall_velocity: top };
-    let dx = cfg.dx();
-    let params = SphParams {
-        kernel: KernelKind::QuarticSpline,
-        h: 1.2 * dx,
-        rho0: RHO0,
-        // Morris' criterion c² ≥ F L / δ with δ = 0.01 gives 4.5e-3 m/s; take 1e-2 (Ma = 2.5e-3).
-        c: 1e-2,
-        mu: NU * RHO0,
-        body_force: [if top == 0.0 { F } else { 0.0 }, 0.0],
-        periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
-        dt_max: 1.0,
-        ..Default::default()
-    };
-    (cfg, params)
+    let (cfg, params) = plate_channel(n_across, top);
+    (cfg, SphParams { body_force: [if top == 0.0 { F } else { 0.0 }, 0.0], ..params })
 }
 
 /// (E∞, E₂) of row-binned fluid vx against `exact(z)`, relative to `scale`.
@@ -53,6 +42,16 @@ fn errors(s: &Solver, dx: Real, scale: Real, exact: impl Fn(Real) -> Real) -> (R
         n += 1;
     }
     (einf, (e2 / n as Real).sqrt())
+}
+
+/// Poiseuille start-up at `n` across with the parameters changed by `with`, run to `t`: the
+/// solver and its (E∞, E₂) against the series, relative to u_max = F L²/(8ν).
+fn poiseuille_run(n: usize, t: Real, with: impl FnOnce(SphParams) -> SphParams) -> (Solver, Real, Real) {
+    let (cfg, params) = channel(n, 0.0);
+    let mut s = Solver::new(with(params), cfg.build(), 0.0).expect("valid");
+    s.advance_to(t).expect("no blow-up");
+    let (einf, e2) = errors(&s, cfg.dx(), F * L * L / (8.0 * NU), |z| poiseuille(z, t, F, NU, L, 200));
+    (s, einf, e2)
 }
 
 #[test]
@@ -104,7 +103,6 @@ fn couette_start_up_matches_the_series_solution() {
 
 #[test]
 fn poiseuille_error_decreases_with_resolution_and_literal_eq12_constant_is_far_off() {
-    let umax = F * L * L / (8.0 * NU);
     // E₂ at t = 0.225 s with eq 12's constant from the kernel's second moment on the particle
     // lattice (default): 0.169 / 0.046 / 0.012 % at 10 / 20 / 40 across (0.003 % at 80,
     // examples/poiseuille.rs): second-order convergence. With the continuous moment the error stops
@@ -113,40 +111,26 @@ fn poiseuille_error_decreases_with_resolution_and_literal_eq12_constant_is_far_o
     let t = 0.225;
     let mut e = vec![];
     for n in [10, 20, 40] {
-        let (cfg, params) = channel(n, 0.0);
-        let mut s = Solver::new(params, cfg.build(), 0.0).expect("valid");
-        s.advance_to(t).expect("no blow-up");
-        let (_, e2) = errors(&s, cfg.dx(), umax, |z| poiseuille(z, t, F, NU, L, 200));
+        let (_, _, e2) = poiseuille_run(n, t, |p| p);
         eprintln!("{n} across: E2 = {:.4} %", 100.0 * e2);
         e.push(e2);
     }
     assert!(e[0] > e[1] && e[1] > e[2], "E2 must decrease: {e:?}");
     assert!(e[1] / e[2] >= 3.0, "second order from 20 to 40 across: {e:?}");
-    let (cfg, params) = channel(40, 0.0);
-    let params = SphParams { viscous_constant: sonoflow_sph::ViscousConstant::SecondMoment, ..params };
-    let mut s = Solver::new(params, cfg.build(), 0.0).expect("valid");
-    s.advance_to(t).expect("no blow-up");
-    let (_, e2c) = errors(&s, cfg.dx(), umax, |z| poiseuille(z, t, F, NU, L, 200));
+    let (_, _, e2c) =
+        poiseuille_run(40, t, |p| SphParams { viscous_constant: sonoflow_sph::ViscousConstant::SecondMoment, ..p });
     eprintln!("40 across, continuous moment: E2 = {:.4} %", 100.0 * e2c);
     assert!(e2c > 3.0 * e[2], "{e2c} vs {}", e[2]);
     // With C = 8/(κh)², κh = support radius, the viscosity is 3.9x too small: far from the series.
-    let (cfg, params) = channel(20, 0.0);
-    let params = SphParams { viscous_constant: sonoflow_sph::ViscousConstant::SupportRadius, ..params };
-    let mut s = Solver::new(params, cfg.build(), 0.0).expect("valid");
-    s.advance_to(t).expect("no blow-up");
-    let (einf, _) = errors(&s, cfg.dx(), umax, |z| poiseuille(z, t, F, NU, L, 200));
+    let (_, einf, _) =
+        poiseuille_run(20, t, |p| SphParams { viscous_constant: sonoflow_sph::ViscousConstant::SupportRadius, ..p });
     eprintln!("literal support-radius constant: E_inf = {:.1} %", 100.0 * einf);
     assert!(einf > 0.2, "{einf}");
 }
 
 #[test]
 fn morris_viscous_term_also_reproduces_poiseuille() {
-    let (cfg, params) = channel(20, 0.0);
-    let params = SphParams { viscous_term: ViscousTerm::Morris, ..params };
-    let umax = F * L * L / (8.0 * NU);
-    let mut s = Solver::new(params, cfg.build(), 0.0).expect("valid");
-    s.advance_to(0.45).expect("no blow-up");
-    let (einf, e2) = errors(&s, cfg.dx(), umax, |z| poiseuille(z, 0.45, F, NU, L, 200));
+    let (_, einf, e2) = poiseuille_run(20, 0.45, |p| SphParams { viscous_term: ViscousTerm::Morris, ..p });
     eprintln!("Morris, 20 across, t = 0.45: E_inf = {:.3} %, E2 = {:.3} %", 100.0 * einf, 100.0 * e2);
     assert!(einf <= 0.03, "{einf}");
 }
@@ -195,9 +179,7 @@ fn outputs_land_exactly_on_acquisition_times() {
 #[test]
 fn blow_up_names_time_particle_and_criterion_instead_of_nan() {
     // Far too small sound speed for the body force: density error grows past the limit.
-    let (cfg, params) = channel(10, 0.0);
-    let params = SphParams { c: 1e-5, body_force: [F, -5.0], density_error_limit: 0.05, ..params };
-    let mut s = Solver::new(params, cfg.build(), 0.0).expect("valid");
+    let mut s = far_too_small_c().expect("valid");
     let err = s.advance_to(10.0).expect_err("must blow up");
     eprintln!("{err}");
     match &err {
@@ -291,10 +273,7 @@ fn single_evaluation_integrator_gives_the_same_poiseuille_at_half_the_evaluation
     let t = 0.225;
     let mut fields = vec![];
     for integrator in [sonoflow_sph::Integrator::PredictorCorrector, sonoflow_sph::Integrator::SingleEvaluation] {
-        let (cfg, params) = channel(40, 0.0);
-        let mut s = Solver::new(SphParams { integrator, ..params }, cfg.build(), 0.0).expect("valid");
-        s.advance_to(t).expect("no blow-up");
-        let (einf, e2) = errors(&s, cfg.dx(), umax, |z| poiseuille(z, t, F, NU, L, 200));
+        let (s, einf, e2) = poiseuille_run(40, t, |p| SphParams { integrator, ..p });
         eprintln!("{integrator:?}: E_inf {:.4} %, E2 {:.4} %", 100.0 * einf, 100.0 * e2);
         assert!(einf <= 0.03);
         let mut by_id: Vec<(u64, Real)> =

@@ -11,6 +11,7 @@
 
 use sonoflow_sph::fast::{self, Backend, FastWorkspace};
 use sonoflow_sph::setup::{ChannelConfig, OpenChannelConfig};
+use sonoflow_sph::testkit::splitmix;
 use sonoflow_sph::wcsph::{compute_rates, Rate, Workspace};
 use sonoflow_sph::{
     CellList, Kernel, KernelKind, ParticleKind, Particles, Period, ProfileKind, Real, SphParams, ViscousTerm, Waveform,
@@ -19,16 +20,6 @@ use sonoflow_sph::{
 const KINDS: [KernelKind; 3] = [KernelKind::QuarticSpline, KernelKind::WendlandC2, KernelKind::CubicSpline];
 const TOL: Real = 1e-5;
 const RHO0: Real = 1000.0;
-
-/// Deterministic uniform numbers in [-1, 1) (splitmix64).
-fn rnd(seed: &mut u64) -> Real {
-    *seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *seed;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    2.0 * ((z >> 11) as Real / (1u64 << 53) as Real) - 1.0
-}
 
 /// A scene: particles, spacing and periodic axes.
 struct Scene {
@@ -46,11 +37,11 @@ fn disorder(p: &mut Particles, dx: Real, jit: Real, u: Real, seed: u64) {
         if p.kind[i].is_wall() {
             continue;
         }
-        p.x[i] += jit * dx * rnd(&mut s);
-        p.z[i] += jit * dx * rnd(&mut s);
-        p.vx[i] += u * (rnd(&mut s) + 50.0 * p.z[i] / dx * 0.01);
-        p.vz[i] += u * rnd(&mut s);
-        p.rho[i] *= 1.0 + 0.01 * rnd(&mut s);
+        p.x[i] += jit * dx * splitmix(&mut s);
+        p.z[i] += jit * dx * splitmix(&mut s);
+        p.vx[i] += u * (splitmix(&mut s) + 50.0 * p.z[i] / dx * 0.01);
+        p.vz[i] += u * splitmix(&mut s);
+        p.rho[i] *= 1.0 + 0.01 * splitmix(&mut s);
     }
 }
 

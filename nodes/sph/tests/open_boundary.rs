@@ -2,6 +2,7 @@
 //! and drained through an outlet reservoir, steady and with flow reversal.
 
 use sonoflow_sph::setup::OpenChannelConfig;
+use sonoflow_sph::testkit::row_mean_vx;
 use sonoflow_sph::womersley::profile_velocity;
 use sonoflow_sph::{ParticleKind, Real, Solver, SphParams, Waveform, WaveformSpec};
 use std::collections::HashSet;
@@ -31,19 +32,11 @@ fn channel_with(
 
 /// Row-binned vx over x ∈ [x0, x1] against `exact(z)`, E∞ relative to `scale`.
 fn profile_error(s: &Solver, dx: Real, x0: Real, x1: Real, scale: Real, exact: impl Fn(Real) -> Real) -> Real {
-    let p = &s.particles;
     let mut e: Real = 0.0;
     for row in 1..20 {
         let z = row as Real * dx;
-        let (mut sum, mut n) = (0.0, 0);
-        for i in 0..p.len() {
-            if p.kind[i] == ParticleKind::Fluid && (p.z[i] - z).abs() < 0.5 * dx && p.x[i] > x0 && p.x[i] < x1 {
-                sum += p.vx[i];
-                n += 1;
-            }
-        }
-        assert!(n > 0, "row {row} empty");
-        e = e.max((sum / n as Real - exact(z)).abs() / scale);
+        let u = row_mean_vx(&s.particles, z, dx, Some((x0, x1))).unwrap_or_else(|| panic!("row {row} empty"));
+        e = e.max((u - exact(z)).abs() / scale);
     }
     e
 }

@@ -1,6 +1,7 @@
 //! Operator tests on lattices (sph-validation.md V0): kernel normalisation and gradient identities,
 //! the viscous operators on u = (z², 0), and continuity on a linear field.
 
+use sonoflow_sph::testkit::splitmix;
 use sonoflow_sph::wcsph::{compute_rates, Workspace};
 use sonoflow_sph::{CellList, Kernel, KernelKind, ParticleKind, Particles, Real, SphParams, ViscousTerm};
 
@@ -15,16 +16,6 @@ fn h_range(kind: KernelKind) -> &'static [Real] {
     }
 }
 
-/// Deterministic uniform numbers in [-1, 1) (splitmix64).
-fn jitter(seed: &mut u64) -> Real {
-    *seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *seed;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    2.0 * ((z >> 11) as Real / (1u64 << 53) as Real) - 1.0
-}
-
 /// n × n fluid lattice with spacing dx centred on the origin, jitter amplitude `jit` · dx.
 fn lattice(n: usize, dx: Real, jit: Real, rho0: Real) -> Particles {
     let mut p = Particles::default();
@@ -32,8 +23,8 @@ fn lattice(n: usize, dx: Real, jit: Real, rho0: Real) -> Particles {
     let c = (n as Real - 1.0) / 2.0;
     for j in 0..n {
         for i in 0..n {
-            let x = (i as Real - c) * dx + jit * dx * jitter(&mut seed);
-            let z = (j as Real - c) * dx + jit * dx * jitter(&mut seed);
+            let x = (i as Real - c) * dx + jit * dx * splitmix(&mut seed);
+            let z = (j as Real - c) * dx + jit * dx * splitmix(&mut seed);
             p.push(x, z, 0.0, 0.0, rho0, rho0 * dx * dx, ParticleKind::Fluid, (j * n + i) as u64);
         }
     }

@@ -2,6 +2,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 use sonoflow_sph::setup::ChannelConfig;
+use sonoflow_sph::testkit::row_mean_vx;
 use sonoflow_sph::womersley::forced_velocity;
 use sonoflow_sph::{KernelKind, ParticleKind, Period, PulsatileForce, Real, Solver, SphParams, WaveformSpec};
 use std::f64::consts::PI;
@@ -59,17 +60,7 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
         }
     }
     let mut s = Solver::new(params, p, 0.0).expect("valid");
-    let centre = |s: &Solver| {
-        let p = &s.particles;
-        let (mut sum, mut n) = (0.0, 0);
-        for i in 0..p.len() {
-            if p.kind[i] == ParticleKind::Fluid && (p.z[i] - a).abs() < 0.5 * dx {
-                sum += p.vx[i];
-                n += 1;
-            }
-        }
-        sum / n as Real
-    };
+    let centre = |s: &Solver| row_mean_vx(&s.particles, a, dx, None).unwrap_or(Real::NAN);
     let amp_exact = 1.026 * k / omega;
     let (mut ts, mut us, mut ue) = (vec![], vec![], vec![]);
     let mut worst_profile: Real = 0.0;
@@ -83,19 +74,11 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
             ue.push(forced_velocity(&fw, 0.0, t, a, nu));
             if (j - n_samples) % (n_samples / 8) == 0 {
                 // profile error, row-binned
-                let p = &s.particles;
                 let mut e: Real = 0.0;
                 for row in 1..40 {
                     let z = row as Real * dx;
-                    let (mut sum, mut n) = (0.0, 0);
-                    for i in 0..p.len() {
-                        if p.kind[i] == ParticleKind::Fluid && (p.z[i] - z).abs() < 0.5 * dx {
-                            sum += p.vx[i];
-                            n += 1;
-                        }
-                    }
-                    if n > 0 {
-                        e = e.max((sum / n as Real - forced_velocity(&fw, z - a, t, a, nu)).abs());
+                    if let Some(u) = row_mean_vx(&s.particles, z, dx, None) {
+                        e = e.max((u - forced_velocity(&fw, z - a, t, a, nu)).abs());
                     }
                 }
                 worst_profile = worst_profile.max(e / amp_exact);

@@ -1,59 +1,53 @@
-//! Beamforming and Doppler cases (from `nodes/beamform/tests/contracts.rs` and `focus.rs`, plus
-//! f-number extremes, a focus on a pixel, NaN RF and an end-to-end SIMUS Doppler packet).
+//! Beamforming and Doppler cases (the scenes of `nodes/beamform/tests/contracts.rs` and `focus.rs`
+//! and `nodes/doppler/tests/contracts.rs`, from the crates' testkits, plus f-number extremes, a
+//! focus on a pixel, NaN RF and an end-to-end SIMUS Doppler packet).
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use rand::{Rng, SeedableRng};
-use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
-use sonoflow_doppler::{
-    flags, solve_vector, ClutterFilter, DopplerEstimator, DopplerParams, Estimator, Packet, Projection, VectorField,
-    VectorInput,
-};
-use sonoflow_simus::{FrequencyPlan, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
+use sonoflow_beamform::testkit::{centroid, finite_c, one_scatterer, paper_das, RfSim};
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, TxWave, C32};
+use sonoflow_doppler::testkit::{approaching_packet, degenerate_vector_solves, frame_refs, map_finite, phase_packet};
+use sonoflow_doppler::{flags, ClutterFilter, DopplerEstimator, DopplerParams, Estimator, Packet};
+use sonoflow_simus::{Scatterers, Transmit};
 use std::f64::consts::PI;
 
 pub(super) fn cases() -> Vec<Case> {
-    fn b(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Beamform, name, stresses, expected, run }
-    }
-    fn d(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Doppler, name, stresses, expected, run }
-    }
     vec![
-        b(
+        Stage::Beamform.case(
             "point-scatterer-focus",
             "SIMUS RF of a point scatterer at (2, 20) mm → rf2iq → DAS (plane wave 0°, f-number 3, receive 0° and \
              +15°); check: the -3 dB main-lobe centroid within lambda/10 of the scatterer",
             Expected::Pass,
             point_focus,
         ),
-        b(
+        Stage::Beamform.case(
             "focus-on-a-pixel",
             "focused transmit whose focus is exactly a grid pixel (|p - f| = 0 in the virtual-source model), a \
              scatterer there; check: finite image and projection, centroid within lambda/10",
             Expected::Pass,
             focus_on_pixel,
         ),
-        b(
+        Stage::Beamform.case(
             "fnumber-1000",
             "receive f-number 1000: the aperture z/(2F) ~ 10 µm is narrower than the pitch, most pixels have no \
              element; check: finite image, exactly 0 where no element is active",
             Expected::Pass,
             fnumber_1000,
         ),
-        b(
+        Stage::Beamform.case(
             "fnumber-0.01",
             "receive f-number 0.01 (aperture ~ 1 m wide); check: the image equals the full-aperture (F = 0) image",
             Expected::Pass,
             fnumber_tiny,
         ),
-        b(
+        Stage::Beamform.case(
             "grid-on-probe-face",
             "a grid starting at z = 0 (pixels on the elements: zero receive distance, zero aperture); check: finite \
              image and finite delay gradient",
             Expected::Pass,
             grid_on_face,
         ),
-        b(
+        Stage::Beamform.case(
             "nan-rf-sample",
             "one NaN RF sample (a corrupt replay) through rf2iq → DAS → Doppler: documented to propagate into the \
              I/Q of its element; check: every non-finite image pixel is flagged 'no estimate' with velocity 0, no \
@@ -61,31 +55,31 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             nan_rf,
         ),
-        b(
+        Stage::Beamform.case(
             "rf2iq-undersampled",
             "fs = 8 MHz for fc = 5 MHz (below Nyquist)",
             Expected::ClearError(&["`rf2iq.fc`", "fs/2"]),
             rf2iq_undersampled,
         ),
-        b(
+        Stage::Beamform.case(
             "negative-fnumber",
             "receive f-number -1",
             Expected::ClearError(&["`das.fnumber`", "[0, 1000]"]),
             negative_fnumber,
         ),
-        b(
+        Stage::Beamform.case(
             "steered-full-aperture",
             "receive angle 0.2 rad with f-number 0 (a steered sub-aperture needs a finite width)",
             Expected::ClearError(&["`das.fnumber`", "rx_angle"]),
             steered_full_aperture,
         ),
-        b(
+        Stage::Beamform.case(
             "iq-length-mismatch",
             "an I/Q frame of 10 samples for a 128 x 100 plan",
             Expected::ClearError(&["`iq`", "expected 12800"]),
             iq_mismatch,
         ),
-        d(
+        Stage::Doppler.case(
             "exact-nyquist",
             "a phase step of exactly pi per frame (|v| = V_N, the sign is undecidable) and of 1.05 pi (wraps); check: \
              both flagged 'aliasing' and finite (autocorrelation and Loupas); autocorrelation: |v| = V_N, 1.05 V_N \
@@ -93,27 +87,27 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             exact_nyquist,
         ),
-        d(
+        Stage::Doppler.case(
             "half-nyquist-and-sign",
             "phase steps of ±0.5 pi per frame and echo delays shrinking by 2 v/(c PRF) (motion toward the probe); \
              check: v = ±V_N/2 to 1e-6, v = +0.2 m/s to 1e-4 m/s, not flagged",
             Expected::Pass,
             half_nyquist,
         ),
-        d(
+        Stage::Doppler.case(
             "zero-signal",
             "an all-zero packet; check: 'no estimate' everywhere, velocity, variance and power 0 — never NaN",
             Expected::Pass,
             zero_signal,
         ),
-        d(
+        Stage::Doppler.case(
             "nan-pixel",
             "one NaN I/Q sample in one pixel of an 8-frame packet; check: that pixel 'no estimate', velocity 0, the \
              others unaffected",
             Expected::Pass,
             nan_pixel,
         ),
-        d(
+        Stage::Doppler.case(
             "simus-axial-motion",
             "end to end: 400 SIMUS scatterers moving toward the probe at V_N/2 = 0.385 m/s, 8 frames at 10 kHz, \
              rf2iq → DAS → clutter filter (order 0) → Loupas Doppler; check: mean velocity within 5 % of 0.385 m/s, \
@@ -121,21 +115,21 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             simus_motion,
         ),
-        d(
+        Stage::Doppler.case(
             "vector-degenerate-geometry",
             "vector Doppler from the same receive angle twice (singular 2 x 2 system) and from one flagged input; \
              check: 'no estimate' with (vx, vz) = (0, 0), never NaN",
             Expected::Pass,
             vector_degenerate,
         ),
-        d(
+        Stage::Doppler.case(
             "single-frame-packet",
             "a packet of 1 frame for lag 1 (no pair to correlate)",
             Expected::ClearError(&["packet frames"]),
             single_frame,
         ),
-        d("zero-prf", "PRF 0 Hz", Expected::ClearError(&["`doppler.prf`", "> 0"]), zero_prf),
-        d(
+        Stage::Doppler.case("zero-prf", "PRF 0 Hz", Expected::ClearError(&["`doppler.prf`", "> 0"]), zero_prf),
+        Stage::Doppler.case(
             "clutter-order-too-high",
             "polynomial clutter filter of order 31 on 32 frames (removes everything)",
             Expected::ClearError(&["`clutter.order`"]),
@@ -146,86 +140,11 @@ pub(super) fn cases() -> Vec<Case> {
 
 const LAMBDA: f64 = 1540.0 / 5e6;
 
-fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
-    DasParams {
-        fc: 5e6,
-        c: 1540.0,
-        fs,
-        t0: 0.0,
-        pitch: 0.30e-3,
-        n_elements: 128,
-        fnumber,
-        rx_angle,
-        interpolation: Interpolation::Linear,
-        apodization: Default::default(),
-    }
-}
-
-/// SIMUS with the paper probe and a fixed plan, demodulated.
-struct RfSim {
-    simus: Simus,
-    probe: Probe,
-    plan: FrequencyPlan,
-    rf2iq: Rf2Iq,
-}
-
-impl RfSim {
-    fn new(max_distance: f64, max_delay: f64) -> Result<Self, String> {
-        let probe = Probe::paper_5mhz();
-        let simus = Simus::new(probe.clone(), Medium::default(), SimusOptions::default()).msg()?;
-        let plan = simus.plan_for_max_distance(max_distance, max_delay).msg()?;
-        let rf2iq = Rf2Iq::new(Rf2IqParams::new(probe.fc, plan.fs, Some(probe.bandwidth))).msg()?;
-        Ok(Self { simus, probe, plan, rf2iq })
-    }
-
-    fn rf(&mut self, scat: &Scatterers, tx: &Transmit) -> Result<Vec<f32>, String> {
-        let mut rf = vec![0f32; self.probe.n_elements * self.plan.n_samples];
-        self.simus.simulate_into(scat, tx, &self.plan, &mut rf).msg()?;
-        Ok(rf)
-    }
-
-    fn iq_of(&mut self, rf: &[f32]) -> Result<Vec<C32>, String> {
-        self.rf2iq.process_to_vec(RfView::element_major(rf, self.plan.n_samples, self.probe.n_elements)).msg()
-    }
-
-    fn iq(&mut self, scat: &Scatterers, tx: &Transmit) -> Result<Vec<C32>, String> {
-        let rf = self.rf(scat, tx)?;
-        self.iq_of(&rf)
-    }
-}
-
-/// Centroid of |img|² over the pixels above half the peak (-3 dB); None if the lobe touches the border.
-fn centroid(img: &[C32], g: &Grid) -> Option<(f64, f64)> {
-    let int: Vec<f64> = img.iter().map(|c| f64::from(c.norm_sqr())).collect();
-    let max = int.iter().copied().fold(0.0, f64::max);
-    let (mut sx, mut sz, mut sw) = (0.0, 0.0, 0.0);
-    for (i, v) in int.iter().enumerate() {
-        if *v >= 0.5 * max {
-            let (iz, ix) = (i / g.nx, i % g.nx);
-            if ix == 0 || ix + 1 == g.nx || iz == 0 || iz + 1 == g.nz {
-                return None;
-            }
-            sx += v * g.x(ix);
-            sz += v * g.z(iz);
-            sw += v;
-        }
-    }
-    (sw > 0.0).then(|| (sx / sw, sz / sw))
-}
-
-fn finite_c(v: &[C32]) -> bool {
-    v.iter().all(|c| c.re.is_finite() && c.im.is_finite())
-}
-
-fn one(x: f64, z: f64) -> Result<Scatterers, String> {
-    Scatterers::new(vec![x as f32], vec![z as f32], vec![1.0]).msg()
-}
-
 fn point_focus(_: &Ctx) -> CaseResult {
     let (xs, zs) = (2.0e-3, 20.0e-3);
-    let mut sim = RfSim::new(0.045, 2e-6)?;
+    let mut sim = RfSim::new(0.045, 2e-6);
     let tx = Transmit::plane_wave(&sim.probe, 1540.0, 0.0).msg()?;
-    let iq = sim.iq(&one(xs, zs)?, &tx)?;
+    let iq = sim.iq(&one_scatterer(xs, zs), &tx);
     let grid = Grid::spanning(xs - 0.5e-3, xs + 0.5e-3, 51, zs - 1.5e-3, zs + 1.5e-3, 151).msg()?;
     let mut worst: f64 = 0.0;
     let mut parts = vec![];
@@ -250,9 +169,9 @@ fn point_focus(_: &Ctx) -> CaseResult {
 
 fn focus_on_pixel(_: &Ctx) -> CaseResult {
     let (xf, zf) = (0.0, 20.0e-3);
-    let mut sim = RfSim::new(0.045, 2e-6)?;
+    let mut sim = RfSim::new(0.045, 2e-6);
     let tx = Transmit::focused(&sim.probe, 1540.0, xf, zf).msg()?;
-    let iq = sim.iq(&one(xf, zf)?, &tx)?;
+    let iq = sim.iq(&one_scatterer(xf, zf), &tx);
     // 41 x 121 nodes, 25 µm steps: node (20, 60) is the focus exactly
     let grid = Grid::spanning(xf - 0.5e-3, xf + 0.5e-3, 41, zf - 1.5e-3, zf + 1.5e-3, 121).msg()?;
     let plan =
@@ -275,9 +194,9 @@ fn focus_on_pixel(_: &Ctx) -> CaseResult {
 
 /// A single-scatterer I/Q frame for the f-number cases.
 fn scatterer_iq() -> Result<(Vec<C32>, RfSim, Grid), String> {
-    let mut sim = RfSim::new(0.045, 2e-6)?;
+    let mut sim = RfSim::new(0.045, 2e-6);
     let tx = Transmit::plane_wave(&sim.probe, 1540.0, 0.0).msg()?;
-    let iq = sim.iq(&one(0.0, 20e-3)?, &tx)?;
+    let iq = sim.iq(&one_scatterer(0.0, 20e-3), &tx);
     let grid = Grid::spanning(-2e-3, 2e-3, 41, 18e-3, 22e-3, 41).msg()?;
     Ok((iq, sim, grid))
 }
@@ -346,7 +265,7 @@ fn grid_on_face(_: &Ctx) -> CaseResult {
 }
 
 fn nan_rf(_: &Ctx) -> CaseResult {
-    let mut sim = RfSim::new(0.03, 0.0)?;
+    let mut sim = RfSim::new(0.03, 0.0);
     let tx = Transmit::plane_wave(&sim.probe, 1540.0, 0.0).msg()?;
     let grid = Grid::spanning(-1e-3, 1e-3, 11, 19e-3, 21e-3, 21).msg()?;
     let plan =
@@ -359,21 +278,21 @@ fn nan_rf(_: &Ctx) -> CaseResult {
     }
     let mut frames = vec![];
     for k in 0..4 {
-        let mut rf = sim.rf(&scat, &tx)?;
+        let mut rf = sim.rf(&scat, &tx);
         if k == 2 {
             // element 64, the sample of the echo from z = 20 mm
             let i = (2.0 * 20e-3 / 1540.0 * sim.plan.fs) as usize;
             rf[64 * sim.plan.n_samples + i] = f32::NAN;
         }
-        frames.push(plan.apply_to_vec(&sim.iq_of(&rf)?).msg()?);
+        frames.push(plan.apply_to_vec(&sim.iq_of(&rf)).msg()?);
     }
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let refs = frame_refs(&frames);
     let mut est = DopplerEstimator::for_plan(DopplerParams::new(5e6, 1540.0, 10e3), &plan).msg()?;
     let m = est.estimate_to_map(Packet::Frames(&refs)).msg()?;
     let bad: Vec<usize> =
         (0..grid.n_pixels()).filter(|&p| refs.iter().any(|f| !(f[p].re.is_finite() && f[p].im.is_finite()))).collect();
     let flagged = bad.iter().all(|&p| m.flags[p] & flags::NO_ESTIMATE != 0 && m.velocity[p] == 0.0);
-    let map_finite = m.velocity.iter().chain(&m.variance).chain(&m.power).all(|v| v.is_finite());
+    let map_finite = map_finite(&m);
     Ok(Check::new(
         flagged && map_finite && !bad.is_empty(),
         format!(
@@ -408,46 +327,22 @@ fn iq_mismatch(_: &Ctx) -> CaseResult {
     plan.apply_to_vec(&[C32::new(0.0, 0.0); 10]).map(|_| Check::new(true, "accepted 10 samples")).msg()
 }
 
-/// Frames of one pixel per step: x_n = exp(i step n) (None: zeros).
-fn packet(steps: &[Option<f64>], nf: usize) -> Vec<Vec<C32>> {
-    (0..nf)
-        .map(|n| {
-            steps
-                .iter()
-                .map(|s| match s {
-                    // (-1)^n exactly for a step of pi (no sin(pi n) rounding)
-                    Some(s) if *s == PI => C32::new(if n % 2 == 0 { 1.0 } else { -1.0 }, 0.0),
-                    Some(s) => {
-                        let ph = s * n as f64;
-                        C32::new(ph.cos() as f32, ph.sin() as f32)
-                    }
-                    None => C32::new(0.0, 0.0),
-                })
-                .collect()
-        })
-        .collect()
-}
-
 fn doppler_map(
     steps: &[Option<f64>],
     nf: usize,
     est: Estimator,
     nan: Option<(usize, usize)>,
 ) -> Result<(sonoflow_doppler::DopplerMap, f64), String> {
-    let mut frames = packet(steps, nf);
+    let mut frames = phase_packet(steps, nf);
     if let Some((f, p)) = nan {
         frames[f][p] = C32::new(f32::NAN, 0.0);
     }
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let refs = frame_refs(&frames);
     let mut p = DopplerParams::new(5e6, 1540.0, 10e3);
     p.estimator = est;
     let vn = p.nyquist_velocity();
     let mut e = DopplerEstimator::new(p, steps.len(), 1, 1e-4).msg()?;
     Ok((e.estimate_to_map(Packet::Frames(&refs)).msg()?, vn))
-}
-
-fn map_finite(m: &sonoflow_doppler::DopplerMap) -> bool {
-    m.velocity.iter().chain(&m.variance).chain(&m.power).all(|v| v.is_finite())
 }
 
 fn exact_nyquist(_: &Ctx) -> CaseResult {
@@ -473,14 +368,8 @@ fn half_nyquist(_: &Ctx) -> CaseResult {
     let unflagged = m.flags.iter().all(|f| *f == 0);
     // delays shrinking: toward the probe, v > 0
     let (fc, prf, c, v_true) = (5e6, 10e3, 1540.0, 0.2);
-    let frames: Vec<Vec<C32>> = (0..16)
-        .map(|n| {
-            let tau = 20e-6 - 2.0 * v_true * n as f64 / prf / c;
-            let ph = -2.0 * PI * fc * tau;
-            vec![C32::new(ph.cos() as f32, ph.sin() as f32)]
-        })
-        .collect();
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let frames = approaching_packet(fc, prf, c, v_true, 16);
+    let refs = frame_refs(&frames);
     let v = DopplerEstimator::new(DopplerParams::new(fc, c, prf), 1, 1, 1e-4)
         .msg()?
         .estimate_to_map(Packet::Frames(&refs))
@@ -519,7 +408,7 @@ fn nan_pixel(_: &Ctx) -> CaseResult {
 
 fn simus_motion(_: &Ctx) -> CaseResult {
     let (prf, n_frames) = (10e3, 8usize);
-    let mut sim = RfSim::new(0.035, 0.0)?;
+    let mut sim = RfSim::new(0.035, 0.0);
     let tx = Transmit::plane_wave(&sim.probe, 1540.0, 0.0).msg()?;
     let mut dp = DopplerParams::new(5e6, 1540.0, prf);
     dp.estimator = Estimator::Loupas;
@@ -542,12 +431,12 @@ fn simus_motion(_: &Ctx) -> CaseResult {
             base.iter().map(|b| b.2).collect(),
         )
         .msg()?;
-        frames.push(plan.apply_to_vec(&sim.iq(&s, &tx)?).msg()?);
+        frames.push(plan.apply_to_vec(&sim.iq(&s, &tx)).msg()?);
     }
     let clutter = ClutterFilter::new(0, n_frames).msg()?;
     let mut views: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
     clutter.apply_frames(&mut views).msg()?;
-    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let refs = frame_refs(&frames);
     let m = DopplerEstimator::for_plan(dp, &plan).msg()?.estimate_to_map(Packet::Frames(&refs)).msg()?;
     let good: Vec<f64> = (0..m.velocity.len()).filter(|&p| m.flags[p] == 0).map(|p| f64::from(m.velocity[p])).collect();
     let mean = good.iter().sum::<f64>() / good.len().max(1) as f64;
@@ -560,22 +449,7 @@ fn simus_motion(_: &Ctx) -> CaseResult {
 }
 
 fn vector_degenerate(_: &Ctx) -> CaseResult {
-    let d = vec![0.1f32];
-    let ok = vec![0u8];
-    let bad = vec![flags::NO_ESTIMATE];
-    let same = [
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.1 } },
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.1 } },
-    ];
-    let mut f = VectorField::default();
-    solve_vector(&same, &mut f).msg()?;
-    let a = (f.flags[0], f.vx[0], f.vz[0]);
-    let one_bad = [
-        VectorInput { velocity: &d, flags: &bad, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: -0.2 } },
-        VectorInput { velocity: &d, flags: &ok, projection: Projection::Nominal { tx_tilt: 0.0, rx_angle: 0.2 } },
-    ];
-    solve_vector(&one_bad, &mut f).msg()?;
-    let b = (f.flags[0], f.vx[0], f.vz[0]);
+    let [a, b] = degenerate_vector_solves();
     let want = (flags::NO_ESTIMATE, 0.0, 0.0);
     Ok(Check::new(
         a == want && b == want,

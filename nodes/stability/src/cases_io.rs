@@ -1,28 +1,18 @@
 //! Analytic flow, MCAP and launch-file cases (from `nodes/analytic-flow/src/tests.rs`,
-//! `nodes/mcap-io/tests/truncation.rs` and `errors.rs`, `tests/failures.rs`).
+//! `nodes/mcap-io/tests/truncation.rs` and `errors.rs`, `tests/failures.rs`; the recording and the
+//! launch files from the `testkit` modules of `sonoflow-mcap-io` and `sonoflow-launcher`).
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use sonoflow_analytic_flow::{AnalyticFlow, AnalyticFlowParams, FlowKind, GridSpec, Schedule};
 use sonoflow_launcher::launch::{self, Overrides};
-use sonoflow_mcap_io::{
-    recover, ChannelSpec, McapIoError, McapReader, OutMessage, ReadOptions, RecorderWriter, WriterOptions,
-};
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use sonoflow_launcher::testkit::{self as launch_kit, MINIMAL_GRAPH};
+use sonoflow_mcap_io::testkit::{finished_recording, first_mismatch, read_and_recover, Damaged, FinishedRecording};
+use sonoflow_mcap_io::{McapIoError, McapReader, ReadOptions, RecorderWriter, WriterOptions};
+use std::path::Path;
 
 pub(super) fn cases() -> Vec<Case> {
-    fn a(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::AnalyticFlow, name, stresses, expected, run }
-    }
-    fn m(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Mcap, name, stresses, expected, run }
-    }
-    fn l(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Launch, name, stresses, expected, run }
-    }
     vec![
-        a(
+        Stage::AnalyticFlow.case(
             "advance-a-million-seconds",
             "a Poiseuille vessel at the speed limit v_max = 100 m/s advanced to t = 1e6 s (2.5e9 vessel lengths) and a \
              disk at the omega limit 1e5 rad/s to 1e6 s (1e11 rad); check: every scatterer stays in the vessel at its \
@@ -30,75 +20,80 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             advance_far,
         ),
-        a(
+        Stage::AnalyticFlow.case(
             "invalid-truth-grid",
             "a ground-truth grid with nx = 0",
             Expected::ClearError(&["grid.nx", ">= 1"]),
             invalid_grid,
         ),
-        a(
+        Stage::AnalyticFlow.case(
             "overlapping-packets",
             "3 packets of 8 frames at 5 kHz (1.6 ms each) started 1 ms apart",
             Expected::ClearError(&["schedule.packet_interval", "must not overlap"]),
             overlapping,
         ),
-        a(
+        Stage::AnalyticFlow.case(
             "zero-scatterers",
             "a density of 1e-4 per mm² in a 240 mm² vessel: rounds to no scatterer",
             Expected::ClearError(&["density_per_mm2", "at least 1 scatterer"]),
             no_scatterer,
         ),
-        a(
+        Stage::AnalyticFlow.case(
             "time-backwards-and-nan",
             "advance_to an earlier time, then to NaN; check: both refused, the state unchanged",
             Expected::ClearError(&["goes backwards", "time must be finite"]),
             backwards,
         ),
-        m(
+        Stage::Mcap.case(
             "truncated-mid-chunk",
             "a finished recording cut in the middle of its last chunk (power loss, copy cut short); check: the \
              linear read returns exactly the messages of the complete chunks, recover writes a complete file with them",
             Expected::Pass,
             truncated,
         ),
-        m(
+        Stage::Mcap.case(
             "zeroed-tail",
             "the last chunk and everything after it overwritten with zeros; check: as above",
             Expected::Pass,
             zeroed,
         ),
-        m(
+        Stage::Mcap.case(
             "corrupt-last-chunk",
             "64 flipped bytes inside the last chunk of an unfinished file (its CRC fails); check: as above",
             Expected::Pass,
             corrupt,
         ),
-        m(
+        Stage::Mcap.case(
             "header-only",
             "a file cut 5 bytes after its header (no chunk survives); check: 0 messages read and recovered, no error",
             Expected::Pass,
             header_only,
         ),
-        m(
+        Stage::Mcap.case(
             "not-an-mcap",
             "a text file and an empty file opened as recordings",
             Expected::ClearError(&["is not an MCAP file"]),
             not_mcap,
         ),
-        m(
+        Stage::Mcap.case(
             "refuses-to-overwrite",
             "creating a recording over an existing file (the file must be untouched)",
             Expected::ClearError(&["refusing to overwrite"]),
             overwrite,
         ),
-        l("good-file", "a minimal valid launch file (source → checker); check: it resolves", Expected::Pass, good_launch),
-        l(
+        Stage::Launch.case(
+            "good-file",
+            "a minimal valid launch file (source → checker); check: it resolves",
+            Expected::Pass,
+            good_launch,
+        ),
+        Stage::Launch.case(
             "unknown-key",
             "a misspelt key in [graph]",
             Expected::ClearError(&["unknown field `colour`"]),
             unknown_key,
         ),
-        l(
+        Stage::Launch.case(
             "dangling-input-and-type-mismatch",
             "an input wired to a topic of the wrong type that nobody produces: both problems reported at once",
             Expected::ClearError(&[
@@ -107,25 +102,25 @@ pub(super) fn cases() -> Vec<Case> {
             ]),
             dangling,
         ),
-        l(
+        Stage::Launch.case(
             "out-of-range-params",
             "n_channels = 0 and max_elements = 0 together: one error each",
             Expected::ClearError(&["n_channels = 0 is out of range: 1 ..= 1024", "topics.rf.max_elements = 0 is out of range"]),
             out_of_range,
         ),
-        l(
+        Stage::Launch.case(
             "two-producers",
             "two nodes publishing the same topic",
             Expected::ClearError(&["topic `rf` has 2 producers"]),
             two_producers,
         ),
-        l(
+        Stage::Launch.case(
             "bad-set-and-swap",
             "--set on a missing node and --swap to a missing variant",
             Expected::ClearError(&["no node `nosuch`", "node `source` has no variant `fast`"]),
             bad_overrides,
         ),
-        l(
+        Stage::Launch.case(
             "toml-syntax-error",
             "an unclosed table header",
             Expected::ClearError(&["TOML parse error"]),
@@ -241,100 +236,18 @@ fn backwards(_: &Ctx) -> CaseResult {
 
 // ---- MCAP -----------------------------------------------------------------------------------
 
-/// Deterministic pseudo-random bytes (xorshift64*), different for every (seed, len).
-fn payload(seed: u64, len: usize) -> Vec<u8> {
-    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (len as u64) ^ 0xD1B5_4A32_D192_ED03;
-    if s == 0 {
-        s = 1;
-    }
-    let mut out = Vec::with_capacity(len + 8);
-    while out.len() < len {
-        s ^= s >> 12;
-        s ^= s << 25;
-        s ^= s >> 27;
-        out.extend_from_slice(&s.wrapping_mul(0x2545_F491_4F6C_DD1D).to_le_bytes());
-    }
-    out.truncate(len);
-    out
-}
-
-fn spec(topic: &str) -> ChannelSpec {
-    ChannelSpec {
-        topic: topic.to_string(),
-        message_encoding: "application/octet-stream".to_string(),
-        schema_name: "bytes".to_string(),
-        schema_encoding: "jsonschema".to_string(),
-        schema_data: br#"{"type":"string","contentEncoding":"base64"}"#.to_vec(),
-        metadata: BTreeMap::new(),
-    }
-}
-
-/// A finished recording in its own folder: 60 messages of 20 KiB on two topics in 64 KiB chunks,
-/// with metadata and an attachment. Returns (path, bytes, (chunk start, chunk end, messages) per chunk).
-struct Finished {
-    dir: PathBuf,
-    bytes: Vec<u8>,
-    chunks: Vec<(u64, u64, usize)>,
-    n: usize,
-}
-
-fn finished(ctx: &Ctx, name: &str) -> Result<Finished, String> {
+/// The testkit's finished recording in its own scratch folder.
+fn finished(ctx: &Ctx, name: &str) -> Result<FinishedRecording, String> {
     let dir = ctx.scratch.join(name);
     std::fs::create_dir_all(&dir).msg()?;
-    let path = dir.join("full.mcap");
-    let opts =
-        WriterOptions { chunk_size: 64 * 1024, flush_interval: Duration::from_secs(3600), ..WriterOptions::default() };
-    let mut w = RecorderWriter::create(&path, opts).msg()?;
-    let a = w.add_channel(spec("/a")).msg()?;
-    let b = w.add_channel(spec("/b")).msg()?;
-    let n = 60u32;
-    for seq in 0..n {
-        if seq == 3 {
-            w.metadata("run", BTreeMap::from([("seed".to_string(), "7".to_string())])).msg()?;
-            w.attach("config", "text/plain", b"config bytes".to_vec()).msg()?;
-        }
-        let t = 1000 + u64::from(seq) * 10;
-        let ch = if seq % 2 == 0 { a } else { b };
-        w.write(OutMessage {
-            channel: ch,
-            sequence: seq,
-            log_time: t,
-            publish_time: t,
-            data: payload(u64::from(seq), 20 * 1024),
-        })
-        .msg()?;
-    }
-    w.finish().msg()?;
-    let bytes = std::fs::read(&path).msg()?;
-    let summary = mcap::Summary::read(&bytes).msg()?.ok_or("the finished file has no summary")?;
-    let mut chunks = vec![];
-    for c in &summary.chunk_indexes {
-        let count = summary.stream_chunk(&bytes, c).msg()?.count();
-        chunks.push((c.chunk_start_offset, c.chunk_start_offset + c.chunk_length, count));
-    }
-    Ok(Finished { dir, bytes, chunks, n: n as usize })
-}
-
-impl Finished {
-    /// Messages in the chunks that end at or before `cut`.
-    fn before(&self, cut: u64) -> usize {
-        self.chunks.iter().filter(|c| c.1 <= cut).map(|c| c.2).sum()
-    }
+    Ok(finished_recording(&dir))
 }
 
 /// Reads a damaged copy linearly and recovers it; checks both against the first `want` messages.
-fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize) -> CaseResult {
-    let damaged = f.dir.join(format!("{name}.mcap"));
-    std::fs::write(&damaged, bytes).msg()?;
-    let r = McapReader::open(&damaged).msg()?;
-    let got: Vec<_> = r.messages(&ReadOptions::default()).msg()?.collect::<Result<Vec<_>, _>>().msg()?;
-    let in_order = got.iter().enumerate().all(|(i, m)| {
-        let topic = if i % 2 == 0 { "/a" } else { "/b" };
-        m.sequence == i as u32 && m.data == payload(i as u64, 20 * 1024) && m.topic == topic
-    });
-    let out = f.dir.join(format!("{name}-recovered.mcap"));
-    let stats = recover(&damaged, &out).msg()?;
-    let rr = McapReader::open(&out).msg()?;
+fn check_damaged(f: &FinishedRecording, name: &str, bytes: &[u8], want: usize) -> CaseResult {
+    let Damaged { reader: r, read: got, stats, recovered } = read_and_recover(f, name, bytes);
+    let in_order = first_mismatch(&got, &f.expected).is_none();
+    let rr = McapReader::open(&recovered).msg()?;
     let again = rr.messages(&ReadOptions::default()).msg()?.count();
     let ok = !r.is_complete()
         && got.len() == want
@@ -348,44 +261,35 @@ fn check_damaged(f: &Finished, name: &str, bytes: &[u8], want: usize) -> CaseRes
             "read {} of {} messages (expected {want}, the complete chunks), in order and intact: {in_order}; recovered {} \
              into a complete file: {}",
             got.len(),
-            f.n,
+            f.expected.len(),
             stats.messages,
             rr.is_complete()
         ),
     ))
 }
 
+/// The finished recording in the scratch folder `name`, damaged by `damage` (which also says how
+/// many messages survive), read linearly and recovered.
+fn damaged(ctx: &Ctx, name: &str, damage: fn(&FinishedRecording) -> (Vec<u8>, usize)) -> CaseResult {
+    let f = finished(ctx, name)?;
+    let (bytes, want) = damage(&f);
+    check_damaged(&f, name, &bytes, want)
+}
+
 fn truncated(ctx: &Ctx) -> CaseResult {
-    let f = finished(ctx, "truncated")?;
-    let last = *f.chunks.last().ok_or("no chunk")?;
-    let cut = last.0 + (last.1 - last.0) / 2;
-    check_damaged(&f, "cut", &f.bytes[..cut as usize], f.before(cut))
+    damaged(ctx, "truncated", FinishedRecording::cut_in_last_chunk)
 }
 
 fn zeroed(ctx: &Ctx) -> CaseResult {
-    let f = finished(ctx, "zeroed")?;
-    let last = *f.chunks.last().ok_or("no chunk")?;
-    let mut b = f.bytes.clone();
-    b[last.0 as usize..].fill(0);
-    check_damaged(&f, "zeroed", &b, f.before(last.0))
+    damaged(ctx, "zeroed", FinishedRecording::zeroed_tail)
 }
 
 fn corrupt(ctx: &Ctx) -> CaseResult {
-    let f = finished(ctx, "corrupt")?;
-    let last = *f.chunks.last().ok_or("no chunk")?;
-    let mut b = f.bytes[..last.1 as usize + 10].to_vec();
-    let mid = ((last.0 + last.1) / 2) as usize;
-    for x in &mut b[mid..mid + 64] {
-        *x ^= 0x5A;
-    }
-    check_damaged(&f, "corrupt", &b, f.before(last.0))
+    damaged(ctx, "corrupt", FinishedRecording::corrupt_last_chunk)
 }
 
 fn header_only(ctx: &Ctx) -> CaseResult {
-    let f = finished(ctx, "header")?;
-    let len = f.bytes.get(9..17).and_then(|s| s.try_into().ok()).map(u64::from_le_bytes).ok_or("short file")?;
-    let header_end = 8 + 9 + len as usize;
-    check_damaged(&f, "header", &f.bytes[..header_end + 5], 0)
+    damaged(ctx, "header", |f| (f.bytes[..f.header_end() + 5].to_vec(), 0))
 }
 
 fn not_mcap(ctx: &Ctx) -> CaseResult {
@@ -416,20 +320,6 @@ fn overwrite(ctx: &Ctx) -> CaseResult {
 
 // ---- launch files ---------------------------------------------------------------------------
 
-const GOOD: &str = r#"
-[graph]
-name = "g"
-[topics]
-rf = { type = "RfFrameV2", max_elements = 1024 }
-[nodes.source]
-kind = "test-source"
-outputs = { rf = "rf" }
-params = { n_frames = 2, n_channels = 4, n_samples = 16 }
-[nodes.checker]
-kind = "checker"
-inputs = { rf = "rf" }
-"#;
-
 /// What `sonoflow check` does with a launch file's text: parse, resolve, check (nothing starts).
 fn check_text(text: &str, set: &[&str], swap: &[&str]) -> CaseResult {
     let ov = Overrides {
@@ -445,39 +335,29 @@ fn check_text(text: &str, set: &[&str], swap: &[&str]) -> CaseResult {
 }
 
 fn good_launch(_: &Ctx) -> CaseResult {
-    check_text(GOOD, &[], &[])
+    check_text(MINIMAL_GRAPH, &[], &[])
 }
 
 fn unknown_key(_: &Ctx) -> CaseResult {
-    check_text(&GOOD.replace("[graph]\n", "[graph]\ncolour = 1\n"), &[], &[])
+    check_text(&launch_kit::unknown_key(), &[], &[])
 }
 
 fn dangling(_: &Ctx) -> CaseResult {
-    check_text(
-        &GOOD
-            .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
-            .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV2\", max_elements = 10 }\n"),
-        &[],
-        &[],
-    )
+    check_text(&launch_kit::dangling_input_and_type_mismatch(), &[], &[])
 }
 
 fn out_of_range(_: &Ctx) -> CaseResult {
-    check_text(
-        &GOOD.replace("n_channels = 4", "n_channels = 0").replace("max_elements = 1024", "max_elements = 0"),
-        &[],
-        &[],
-    )
+    check_text(&launch_kit::out_of_range_params(), &[], &[])
 }
 
 fn two_producers(_: &Ctx) -> CaseResult {
-    check_text(&format!("{GOOD}\n[nodes.source2]\nkind = \"test-source\"\noutputs = {{ rf = \"rf\" }}\n"), &[], &[])
+    check_text(&launch_kit::two_producers(), &[], &[])
 }
 
 fn bad_overrides(_: &Ctx) -> CaseResult {
-    check_text(GOOD, &["nosuch.x=1"], &["source=fast"])
+    check_text(MINIMAL_GRAPH, &["nosuch.x=1"], &["source=fast"])
 }
 
 fn toml_syntax(_: &Ctx) -> CaseResult {
-    check_text("[graph\nname = 1", &[], &[])
+    check_text(launch_kit::TOML_SYNTAX_ERROR, &[], &[])
 }

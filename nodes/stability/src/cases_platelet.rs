@@ -1,72 +1,70 @@
-//! Platelet cases (from `nodes/platelet/tests/dynamics.rs`, `stokes.rs` and `networks.rs`, plus a
-//! pile-up of overlapping platelets and shapes far outside the networks' training range).
+//! Platelet cases (from `nodes/platelet/tests/dynamics.rs`, `stokes.rs` and `networks.rs`, with the
+//! fixtures of `sonoflow_platelet::testkit`, plus a pile-up of overlapping platelets and shapes far
+//! outside the networks' training range).
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use sonoflow_platelet::dynamics::{
     CarrierFlow, Channel, DiscStandIn, Dynamics, DynamicsParams, Integrator, ParticleState, Particles, SimpleShear,
     DEFAULT_DENSITY,
 };
-use sonoflow_platelet::nn::model::NetworkModel;
+use sonoflow_platelet::testkit::{one, shipped_model, FixedModel};
 use sonoflow_platelet::{solve_shape, CoefficientModel, Outer, Rotational, Shape, StokesOptions, Translational};
 
 pub(super) fn cases() -> Vec<Case> {
-    fn c(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Platelet, name, stresses, expected, run }
-    }
     vec![
-        c(
+        Stage::Platelet.case(
             "stiff-relaxation-exponential",
             "a platelet (relaxation times ~20 ns) in shear at the paper's 0.25 ms sub-step, 400 sub-steps, exponential \
              integrator; check: V equals the flow to 1e-9 relative, finite",
             Expected::Pass,
             stiff_exponential,
         ),
-        c(
+        Stage::Platelet.case(
             "stiff-relaxation-explicit",
             "the same with forward Euler (stable only below ~2e-8 s)",
             Expected::ClearError(&["allowed finite", "explicit step above the stability limit"]),
             stiff_explicit,
         ),
-        c(
+        Stage::Platelet.case(
             "thinnest-platelet-stokes",
             "Stokes solve of the thinnest platelet of eq 7 (3.5 x 0.15 x 3.5 um, alpha 0.2: 1:50 thin) in the 50 um \
              ball at two resolutions; check: drag and rotation torque agree to 2e-3, lift of the symmetric body ~0",
             Expected::Pass,
             thinnest,
         ),
-        c(
+        Stage::Platelet.case(
             "ball-too-small",
             "the confining ball (radius 2 um) smaller than the platelet",
             Expected::ClearError(&["outer.radius", "must exceed"]),
             ball_too_small,
         ),
-        c(
+        Stage::Platelet.case(
             "model-gives-nan",
             "a coefficient model returning NaN drag",
             Expected::ClearError(&["c_d", "finite and > 0"]),
             model_nan,
         ),
-        c(
+        Stage::Platelet.case(
             "coupling-not-positive-definite",
             "rotation-translation coupling with c_x^2 > c_d c_r (no physical body)",
             Expected::ClearError(&["c_x^2 < c_d c_r"]),
             coupling_bad,
         ),
-        c(
+        Stage::Platelet.case(
             "pile-up-200-overlapping",
             "200 platelets started at the same point in a channel (every pair overlapping), collisions on; check: \
              finite, all inside the walls, the pile pushed apart over > 10 radii",
             Expected::Pass,
             pile_up,
         ),
-        c(
+        Stage::Platelet.case(
             "networks-far-outside-eq7",
             "the shipped networks on shapes far outside eq 7 (Lx 1 and 10 um, Ly 3 um, alpha 0.05 and 5); check: \
              every coefficient finite (the dynamics refuses non-physical ones with a clear error)",
             Expected::Pass,
             networks_far_out,
         ),
-        c(
+        Stage::Platelet.case(
             "zero-sub-steps",
             "dynamics parameters with 0 sub-steps per macro step",
             Expected::ClearError(&["sub_steps"]),
@@ -75,17 +73,15 @@ pub(super) fn cases() -> Vec<Case> {
     ]
 }
 
-fn one_platelet(flow: &dyn CarrierFlow) -> Result<Particles, String> {
-    let mut p = Particles::new(DEFAULT_DENSITY, 1.0).msg()?;
+fn one_platelet(flow: &dyn CarrierFlow) -> Particles {
     let x = [1e-3, 0.6e-3];
     let f = flow.sample(x, 0.0);
-    p.push(Shape::default(), ParticleState { x, phi: 0.3, v: [f.v[0] * 0.5, f.v[1] + 1e-4], omega: 0.0 }).msg()?;
-    Ok(p)
+    one(Shape::default(), ParticleState { x, phi: 0.3, v: [f.v[0] * 0.5, f.v[1] + 1e-4], omega: 0.0 })
 }
 
 fn stiff(integrator: Integrator) -> CaseResult {
     let flow = SimpleShear::new(50.0).msg()?;
-    let mut p = one_platelet(&flow)?;
+    let mut p = one_platelet(&flow);
     let mut d = Dynamics::new(DynamicsParams { integrator, collisions: false, ..Default::default() }).msg()?;
     for k in 0..20 {
         d.macro_step(&mut p, &flow, &DiscStandIn::default(), k as f64 * 5e-3).msg()?;
@@ -122,31 +118,18 @@ fn ball_too_small(_: &Ctx) -> CaseResult {
     solve_shape(&Shape::default(), &o).msg().map(|_| Check::new(false, "solved"))
 }
 
-struct Fixed(Translational, Rotational);
-impl CoefficientModel for Fixed {
-    fn translational(&self, _: &[Shape], _: &[f64], out: &mut [Translational]) {
-        out.fill(self.0);
-    }
-    fn rotational(&self, _: &[Shape], out: &mut [Rotational]) {
-        out.fill(self.1);
-    }
-    fn name(&self) -> &str {
-        "fixed"
-    }
-}
-
 fn model_nan(_: &Ctx) -> CaseResult {
     let flow = Channel::default();
-    let mut p = one_platelet(&flow)?;
-    let m = Fixed(Translational { c_d: f64::NAN, c_l: 0.0, c_p: 0.0 }, Rotational { c_r: 1e-19, c_s: 0.0 });
+    let mut p = one_platelet(&flow);
+    let m = FixedModel::drag(f64::NAN);
     let mut d = Dynamics::new(DynamicsParams::default()).msg()?;
     d.macro_step(&mut p, &flow, &m, 0.0).msg().map(|_| Check::new(false, "stepped"))
 }
 
 fn coupling_bad(_: &Ctx) -> CaseResult {
     let flow = Channel::default();
-    let mut p = one_platelet(&flow)?;
-    let m = Fixed(Translational { c_d: 7e-8, c_l: 0.0, c_p: 1e-12 }, Rotational { c_r: 1e-19, c_s: 0.0 });
+    let mut p = one_platelet(&flow);
+    let m = FixedModel::pitchy();
     let mut d = Dynamics::new(DynamicsParams { coupling: true, ..Default::default() }).msg()?;
     d.macro_step(&mut p, &flow, &m, 0.0).msg().map(|_| Check::new(false, "stepped"))
 }
@@ -181,8 +164,7 @@ fn pile_up(_: &Ctx) -> CaseResult {
 }
 
 fn networks_far_out(_: &Ctx) -> CaseResult {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../platelet/weights");
-    let m = NetworkModel::load_dir(&dir).msg()?;
+    let m = shipped_model();
     let shapes = [
         Shape::from_um(1.0, 0.5, 1.0, 1.0, 1.0),
         Shape::from_um(10.0, 0.5, 10.0, 1.0, 1.0),

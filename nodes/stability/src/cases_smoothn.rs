@@ -1,90 +1,91 @@
-//! smoothn cases (from `nodes/regularise/tests/extremes.rs` and `robustness.rs`, plus 90 % missing
-//! data and 200 decades of scale), and the divergence-free regulariser (`smoothn::divfree`): no
-//! data, 200 decades of scale, extreme noise anisotropy, the smallest grid, a one-pixel-wide
-//! data line and the S bounds (conditioning).
+//! smoothn cases (the runs of `nodes/regularise/tests/extremes.rs` and `robustness.rs`, from
+//! `sonoflow_regularise::testkit`, plus 90 % missing data and 200 decades of scale), and the
+//! divergence-free regulariser (`smoothn::divfree`): no data, 200 decades of scale, extreme noise
+//! anisotropy, the smallest grid, a one-pixel-wide data line and the S bounds (conditioning).
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use sonoflow_regularise::divfree::divergence;
+use sonoflow_regularise::testkit::{
+    corrupt, nan_and_infinity_runs, outlier_scene, random_mask, rms_diff, robust_auto, smooth_field, OutlierScene,
+    OUTLIER_GRID,
+};
 use sonoflow_regularise::{smoothn, DivFree, DivFreeParams, SmoothnParams};
 
 pub(super) fn cases() -> Vec<Case> {
-    fn c(name: &'static str, stresses: &'static str, expected: Expected, run: fn(&Ctx) -> CaseResult) -> Case {
-        Case { stage: Stage::Smoothn, name, stresses, expected, run }
-    }
     vec![
-        c(
+        Stage::Smoothn.case(
             "all-nan",
             "a 2-component 5 x 6 field that is NaN everywhere",
             Expected::ClearError(&["no valid data", "30 grid points"]),
             all_nan,
         ),
-        c(
+        Stage::Smoothn.case(
             "all-zero-weights",
             "finite data with every weight 0",
             Expected::ClearError(&["no valid data"]),
             zero_weights,
         ),
-        c(
+        Stage::Smoothn.case(
             "infinities-like-nan",
             "±inf at 5 points where another run has NaN (robust, automatic S); check: bit-identical results, finite",
             Expected::Pass,
             infinities,
         ),
-        c(
+        Stage::Smoothn.case(
             "90pc-missing",
             "a smooth 64 x 64 vector field with 90 % of the points missing at random and noise sigma = 0.05; check: \
              converged, finite, RMS error of the filled field < 0.1 (a zero or mean fill is off by ~0.6)",
             Expected::Pass,
             missing_90,
         ),
-        c(
+        Stage::Smoothn.case(
             "10pc-gross-outliers",
             "noise sigma = 0.1 plus 10 % of the points replaced by uniform values in ±2.5, robust bisquare; check: RMS \
              error < 0.3 x the non-robust error and < 2 x the outlier-free error",
             Expected::Pass,
             outliers,
         ),
-        c(
+        Stage::Smoothn.case(
             "scale-1e-100-and-1e100",
             "the same noisy field multiplied by 1e-100 and by 1e100 (automatic S); check: S identical and the result \
              scales exactly (relative 1e-9): no underflow/overflow in the GCV sums",
             Expected::Pass,
             scale_extremes,
         ),
-        c(
+        Stage::Smoothn.case(
             "constant-field",
             "a constant field (robust, automatic S, and S = 1e3); check: returned unchanged to 1e-13",
             Expected::Pass,
             constant,
         ),
-        c(
+        Stage::Smoothn.case(
             "one-by-one-grid",
             "a 1 x 1 grid with 2 components (robust): nothing to smooth; check: the value is returned",
             Expected::Pass,
             one_by_one,
         ),
-        c(
+        Stage::Smoothn.case(
             "order-7",
             "penalty order 7 (allowed 1, 2, 3)",
             Expected::ClearError(&["`order` = 7", "1, 2 or 3"]),
             order_7,
         ),
-        c(
+        Stage::Smoothn.case(
             "negative-weight",
             "a weight of -0.5 at grid index 4",
             Expected::ClearError(&["weight at grid index 4", "finite and ≥ 0"]),
             negative_weight,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-all-missing",
             "divergence-free fit of a 12 x 16 field that is NaN everywhere",
             Expected::ClearError(&["no valid data"]),
             df_all_missing,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-scale-1e-100-and-1e100",
             "divergence-free fit (robust, block-CV S, estimated noise ratio) of a noisy channel flow multiplied by \
              1e-100 and 1e100; check: same S (relative 1e-9) and noise ratio, the result scales (relative 1e-6: the system's \
@@ -92,7 +93,7 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             df_scale,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-noise-ratio-1000",
             "noise ratio sigma_x/sigma_z = 1000 (the lateral data carry no weight) and 0.001 (the axial none), data \
              noisy accordingly (sigma 0.05 vs 0.001 m/s), S by block CV; check: finite, divergence-free to 1e-12, the \
@@ -100,27 +101,27 @@ pub(super) fn cases() -> Vec<Case> {
             Expected::Pass,
             df_anisotropy,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-smallest-grid",
             "a 5 x 5 grid (order 3 needs >= 5 per axis), robust, automatic S; check: finite, divergence-free",
             Expected::Pass,
             df_smallest,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-one-pixel-line",
             "data on a single row of a 30 x 40 grid only (everything else missing); check: finite everywhere, \
              the row's vx reproduced within 1 % of u0",
             Expected::Pass,
             df_line,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-s-1e-6-and-1e9",
             "given S = 1e-6 and S = 1e9 (12 decades of conditioning) on a noisy channel; check: both factorise, \
              finite, divergence-free to 1e-12",
             Expected::Pass,
             df_s_bounds,
         ),
-        c(
+        Stage::Smoothn.case(
             "divfree-no-slip-extremes",
             "no-slip wall from a power plane that is NaN, negative or zero everywhere (no wall may come out), and \
              the largest prior weight (100) on every pixel outside a noisy channel; check: no wall from degenerate \
@@ -283,43 +284,6 @@ fn df_s_bounds(_: &Ctx) -> CaseResult {
     Ok(Check::new(ok, parts.join("; ")))
 }
 
-/// (cos 2πx sin πy, sin 2πx cos 1.5πy + 0.3) on an ny × nx grid, component-major.
-fn smooth_field(ny: usize, nx: usize) -> Vec<f64> {
-    let mut f = vec![0.0; 2 * ny * nx];
-    let (tau, pi) = (std::f64::consts::TAU, std::f64::consts::PI);
-    for i in 0..ny {
-        for j in 0..nx {
-            let (y, x) = (i as f64 / ny as f64, j as f64 / nx as f64);
-            f[i * nx + j] = (tau * x).cos() * (pi * y).sin();
-            f[ny * nx + i * nx + j] = (tau * x).sin() * (1.5 * pi * y).cos() + 0.3;
-        }
-    }
-    f
-}
-
-/// `truth` + N(0, σ²); then a fraction `outliers` of the points get uniform values in ±2.5.
-fn corrupt(truth: &[f64], components: usize, sigma: f64, outliers: f64, seed: u64) -> Result<Vec<f64>, String> {
-    let n = truth.len() / components;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let normal = Normal::new(0.0, sigma).msg()?;
-    let mut y: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
-    let mask: Vec<bool> = (0..n).map(|_| rng.gen_bool(outliers)).collect();
-    for p in (0..n).filter(|&p| mask[p]) {
-        for c in 0..components {
-            y[c * n + p] = rng.gen_range(-2.5..2.5);
-        }
-    }
-    Ok(y)
-}
-
-fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
-    (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
-}
-
-fn robust() -> SmoothnParams {
-    SmoothnParams { robust: true, ..SmoothnParams::default() }
-}
-
 fn all_nan(_: &Ctx) -> CaseResult {
     smoothn(&[f64::NAN; 60], &[5, 6], 2, None, &SmoothnParams::default())
         .map(|_| Check::new(false, "returned a result from no data"))
@@ -333,14 +297,7 @@ fn zero_weights(_: &Ctx) -> CaseResult {
 }
 
 fn infinities(_: &Ctx) -> CaseResult {
-    let mut y_nan = corrupt(&smooth_field(16, 20), 2, 0.05, 0.0, 1)?;
-    let mut y_inf = y_nan.clone();
-    for (k, p) in [3usize, 77, 150, 151, 300].iter().enumerate() {
-        y_nan[*p] = f64::NAN;
-        y_inf[*p] = if k % 2 == 0 { f64::INFINITY } else { f64::NEG_INFINITY };
-    }
-    let (a, ra) = smoothn(&y_nan, &[16, 20], 2, None, &robust()).msg()?;
-    let (b, rb) = smoothn(&y_inf, &[16, 20], 2, None, &robust()).msg()?;
+    let [(a, ra), (b, rb)] = nan_and_infinity_runs();
     let same = a.len() == b.len() && a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()) && ra == rb;
     let fin = a.iter().all(|v| v.is_finite());
     Ok(Check::new(same && fin, format!("bit-identical: {same}, finite: {fin}, S = {:.3e}", ra.s)))
@@ -350,15 +307,12 @@ fn missing_90(_: &Ctx) -> CaseResult {
     let (ny, nx) = (64, 64);
     let n = ny * nx;
     let truth = smooth_field(ny, nx);
-    let mut y = corrupt(&truth, 2, 0.05, 0.0, 12)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(13);
-    let mut missing = 0;
-    for p in 0..n {
-        if rng.gen_bool(0.9) {
-            y[p] = f64::NAN;
-            y[n + p] = f64::NAN;
-            missing += 1;
-        }
+    let (mut y, _) = corrupt(&truth, 2, 0.05, 0.0, 12);
+    let holes = random_mask(n, 0.9, 13);
+    let missing = holes.iter().filter(|h| **h).count();
+    for p in (0..n).filter(|&p| holes[p]) {
+        y[p] = f64::NAN;
+        y[n + p] = f64::NAN;
     }
     let (z, r) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
     let fin = z.iter().all(|v| v.is_finite());
@@ -376,14 +330,9 @@ fn missing_90(_: &Ctx) -> CaseResult {
 }
 
 fn outliers(_: &Ctx) -> CaseResult {
-    let (ny, nx) = (64, 64);
-    let truth = smooth_field(ny, nx);
-    let y = corrupt(&truth, 2, 0.1, 0.1, 11)?;
-    let clean = corrupt(&truth, 2, 0.1, 0.0, 11)?;
-    let (zc, _) = smoothn(&clean, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
-    let (z0, _) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
-    let (z, r) = smoothn(&y, &[ny, nx], 2, None, &robust()).msg()?;
-    let (ec, e0, e) = (rms_diff(&zc, &truth), rms_diff(&z0, &truth), rms_diff(&z, &truth));
+    let OutlierScene { truth, y, e_clean: ec, e_plain: e0, .. } = outlier_scene(11);
+    let (z, r) = smoothn(&y, &OUTLIER_GRID, 2, None, &robust_auto()).msg()?;
+    let e = rms_diff(&z, &truth);
     Ok(Check::new(
         e < 0.3 * e0 && e < 2.0 * ec && r.converged,
         format!(
@@ -395,7 +344,7 @@ fn outliers(_: &Ctx) -> CaseResult {
 
 fn scale_extremes(_: &Ctx) -> CaseResult {
     let (ny, nx) = (32, 32);
-    let y = corrupt(&smooth_field(ny, nx), 2, 0.1, 0.0, 21)?;
+    let (y, _) = corrupt(&smooth_field(ny, nx), 2, 0.1, 0.0, 21);
     let (z1, r1) = smoothn(&y, &[ny, nx], 2, None, &SmoothnParams::default()).msg()?;
     let mut parts = vec![];
     let mut ok = true;
@@ -416,7 +365,7 @@ fn constant(_: &Ctx) -> CaseResult {
     let n = ny * nx;
     let y: Vec<f64> = (0..2 * n).map(|i| if i < n { 2.5 } else { -1.25 }).collect();
     let mut worst: f64 = 0.0;
-    for p in [robust(), SmoothnParams { s: Some(1e3), ..SmoothnParams::default() }] {
+    for p in [robust_auto(), SmoothnParams { s: Some(1e3), ..SmoothnParams::default() }] {
         let (z, r) = smoothn(&y, &[ny, nx], 2, None, &p).msg()?;
         let d = z.iter().zip(&y).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         worst = if d.is_nan() || !(r.s.is_finite() && r.s > 0.0) { f64::NAN } else { worst.max(d) };
@@ -425,7 +374,7 @@ fn constant(_: &Ctx) -> CaseResult {
 }
 
 fn one_by_one(_: &Ctx) -> CaseResult {
-    let (z, r) = smoothn(&[3.0, -2.0], &[1, 1], 2, None, &robust()).msg()?;
+    let (z, r) = smoothn(&[3.0, -2.0], &[1, 1], 2, None, &robust_auto()).msg()?;
     Ok(Check::new(z == [3.0, -2.0] && r.converged, format!("returned {z:?}, converged {}", r.converged)))
 }
 

@@ -14,10 +14,12 @@
 //! A case *matches* when the measured outcome is the expected one; `sonoflow stability` exits 0
 //! iff every case matches. `--quick` runs shorter versions of the long cases (for CI).
 //!
-//! The cases come from the crates' own tests (`nodes/*/tests/`), re-implemented compactly here
-//! (test code is not importable), plus extremes a demanding user would try (a scatterer on the
-//! probe face or 30 cm deep, f-number 0.01 and 1000, Doppler at exactly the Nyquist velocity,
-//! 90 % missing data, a single SPH particle, an empty SPH domain, …).
+//! The cases are the crates' own stiff and extreme tests (`nodes/*/tests/`): their scenes, runs and
+//! error measures come from each crate's `testkit` module (feature `testkit`), which the crate's
+//! tests call too; here they are checked against the same bounds. Added are extremes a demanding
+//! user would try (a scatterer on the probe face or 30 cm deep, f-number 0.01 and 1000, Doppler
+//! at exactly the Nyquist velocity, 90 % missing data, a single SPH particle, an empty SPH
+//! domain, …).
 
 mod cases_beamform;
 mod cases_io;
@@ -69,6 +71,17 @@ impl Stage {
         Stage::Launch,
         Stage::Platelet,
     ];
+
+    /// A case of this stage.
+    pub const fn case(
+        self,
+        name: &'static str,
+        stresses: &'static str,
+        expected: Expected,
+        run: fn(&Ctx) -> CaseResult,
+    ) -> Case {
+        Case { stage: self, name, stresses, expected, run }
+    }
 
     /// The name printed in the table.
     pub fn name(self) -> &'static str {
@@ -464,7 +477,7 @@ mod tests {
     }
 
     fn report(expected: Expected, run: fn(&Ctx) -> CaseResult) -> CaseReport {
-        let case = Case { stage: Stage::Sph, name: "t", stresses: "test", expected, run };
+        let case = Stage::Sph.case("t", "test", expected, run);
         run_case(&case, &Ctx { quick: true, scratch: std::env::temp_dir() })
     }
 
