@@ -1,10 +1,10 @@
 //! `analytic-flow` node: thin wiring of `sonoflow-analytic-flow` — particle snapshots at every
 //! acquisition time, the exact velocity field on a grid once per packet (at its mid time).
 
+use crate::flow_topics::{publish_fluid, publish_truth};
 use sonoflow_analytic_flow::{AnalyticFlow, AnalyticFlowParams, GridSpec};
 use sonoflow_messages::types::{ParticleSnapshot, VectorField};
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::*;
 use sonoflow_node_kit::parse_params;
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{port, KindSpec};
@@ -79,31 +79,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             zmin = zmin.min(ps.z[i]);
             zmax = zmax.max(ps.z[i]);
         }
-        let mut h = ParticleSnapshotHeaderV1 {
-            n_particles: n as u32,
-            n_fluid: n as u32,
-            bbox: [xmin, xmax, zmin, zmax],
-            packet: at.packet,
-            frame_in_packet: at.frame_in_packet,
-            packet_size: params.schedule.packet_size,
-            ..Default::default()
-        };
-        h.common.frame_id = at.frame_id;
-        h.common.t_valid = at.t;
-        out.publish_in_place(n, h, |dst| {
-            for (i, d) in dst.iter_mut().enumerate() {
-                d.write(ParticleV1 {
-                    id: ps.id[i],
-                    kind: PARTICLE_FLUID,
-                    x: ps.x[i],
-                    z: ps.z[i],
-                    vx: ps.vx[i],
-                    vz: ps.vz[i],
-                    amplitude: ps.amplitude[i],
-                    reserved: 0.0,
-                });
-            }
-        })?;
+        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, [xmin, xmax, zmin, zmax], ps)?;
         let compute = thread_cpu_ns() - t0;
         kit.published((n * 32) as u64, at.frame_id, at.t, compute)?;
         last_t = at.t;
@@ -112,27 +88,10 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         if let (true, Some(tout)) = (packet_done, truth_out.as_mut()) {
             let t0 = thread_cpu_ns();
             let truth = flow.sample_truth(&grid);
-            let nn = grid.nx as usize * grid.nz as usize;
-            let mut vh = VectorFieldHeaderV1 {
-                grid: GridV1 { x0: grid.x0, z0: grid.z0, dx: grid.dx, dz: grid.dz, nx: grid.nx, nz: grid.nz },
-                n_planes: 3,
-                source: VECTOR_TRUTH,
-                packet: at.packet,
-                converged: 1,
-                ..Default::default()
-            };
-            vh.plane_ids[..3].copy_from_slice(&[plane::VX, plane::VZ, plane::MASK]);
-            vh.common.frame_id = at.frame_id;
-            vh.common.t_valid = params.schedule.packet_mid_time(at.packet);
-            tout.publish_in_place(3 * nn, vh, |dst| {
-                for i in 0..nn {
-                    dst[i].write(truth.vx[i]);
-                    dst[nn + i].write(truth.vz[i]);
-                    dst[2 * nn + i].write(truth.mask[i] as f32);
-                }
-            })?;
+            let t_mid = params.schedule.packet_mid_time(at.packet);
+            publish_truth(tout, &grid, &truth, at.packet, at.frame_id, t_mid)?;
             kit.stats.messages_out += 1;
-            kit.record(at.frame_id, vh.common.t_valid, thread_cpu_ns() - t0)?;
+            kit.record(at.frame_id, t_mid, thread_cpu_ns() - t0)?;
         }
         if (k as u64 + 1).is_multiple_of(step) || k as u64 + 1 == total {
             kit.progress(k as u64 + 1, total);

@@ -14,7 +14,7 @@ use sonoflow_messages::{
     SAMPLE_RF_F32,
 };
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
+use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
 
 /// The `beamformer` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -83,8 +83,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_rx = bf.params().rx_angles_deg.len();
     let mut img = vec![C32::new(0.0, 0.0); bf.params().grid.n_pixels()];
-    let mut last_t = 0.0;
-    for_each(&mut kit, &mut input, |kit, sample| {
+    transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
         if h.sample_format != SAMPLE_RF_F32 {
@@ -92,7 +91,6 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         bf.demodulate(&rf_info(&h), sample.payload())?;
         let demod_ns = process_cpu_ns() - t0;
-        kit.stats.messages_in += 1;
         for j in 0..n_rx {
             let t1 = process_cpu_ns();
             bf.image(&rf_info(&h), j, &mut img)?;
@@ -106,13 +104,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             })?;
             kit.published((img.len() * 8) as u64, ih.common.frame_id, ih.common.t_valid, compute)?;
         }
-        last_t = h.common.t_valid;
-        Ok(Flow::Continue)
-    })?;
-    out.publish_eos(last_t)?;
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
-    Ok(())
+        Ok(())
+    })
 }
 
 #[cfg(test)]

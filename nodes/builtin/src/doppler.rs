@@ -187,8 +187,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     if let Some(m) = mout.as_mut() {
         m.publish_eos(last_t)?;
     }
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
+    kit.finish_after(&input)?;
     Ok(())
 }
 

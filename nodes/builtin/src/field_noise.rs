@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::MessageType::*;
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, in_range, parse_params, thread_cpu_ns, Flow, Kit};
+use sonoflow_node_kit::{in_range, parse_params, thread_cpu_ns, transform, Kit};
 use sonoflow_node_kit::{port, KindSpec};
 
 /// The `field-noise` node kind.
@@ -123,21 +123,11 @@ pub fn run_field_noise(mut kit: Kit) -> anyhow::Result<()> {
     let mut input = kit.input::<sonoflow_messages::types::VectorField>("clean")?;
     let mut out = kit.output::<sonoflow_messages::types::VectorField>("noisy")?;
     kit.handshake(&mut [&mut input, &mut out])?;
-    let mut last_t = 0.0;
     let mut buf = Vec::new();
-    for_each(&mut kit, &mut input, |kit, sample| {
+    transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = thread_cpu_ns();
         let mut oh = corrupt_field(&p, sample.user_header(), sample.payload(), &mut buf)?;
-        let compute = thread_cpu_ns() - t0;
-        oh.common.compute_ns = compute;
-        out.publish_copy(oh, &buf)?;
-        kit.stats.messages_in += 1;
-        kit.published((buf.len() * 4) as u64, oh.common.frame_id, oh.common.t_valid, compute)?;
-        last_t = oh.common.t_valid;
-        Ok(Flow::Continue)
-    })?;
-    out.publish_eos(last_t)?;
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
-    Ok(())
+        oh.common.compute_ns = thread_cpu_ns() - t0;
+        Ok(kit.publish_copy(out, oh, &buf)?)
+    })
 }

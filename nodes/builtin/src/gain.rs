@@ -4,8 +4,8 @@
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::types::RfFrame;
 use sonoflow_messages::MessageType::*;
+use sonoflow_node_kit::transform;
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, Flow};
 use sonoflow_node_kit::{parse_params, thread_cpu_ns, Kit};
 use sonoflow_node_kit::{port, KindSpec};
 
@@ -46,8 +46,7 @@ pub fn run_gain(mut kit: Kit) -> anyhow::Result<()> {
     let mut input = kit.input::<RfFrame>("rf_in")?;
     let mut out = kit.output::<RfFrame>("rf_out")?;
     kit.handshake(&mut [&mut input, &mut out])?;
-    let mut last_t = 0.0;
-    for_each(&mut kit, &mut input, |kit, sample| {
+    transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = thread_cpu_ns();
         let src = sample.payload();
         let mut h = *sample.user_header();
@@ -57,19 +56,13 @@ pub fn run_gain(mut kit: Kit) -> anyhow::Result<()> {
             t_valid: h.common.t_valid,
             ..Default::default()
         };
-        last_t = h.common.t_valid;
         out.publish_in_place(src.len(), h, |dst| {
             for (d, s) in dst.iter_mut().zip(src) {
                 d.write(s * p.gain);
             }
         })?;
         let compute = thread_cpu_ns() - t0;
-        kit.stats.messages_in += 1;
         kit.published((src.len() * 4) as u64, h.common.frame_id, h.common.t_valid, compute)?;
-        Ok(Flow::Continue)
-    })?;
-    out.publish_eos(last_t)?;
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
-    Ok(())
+        Ok(())
+    })
 }

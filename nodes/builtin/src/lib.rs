@@ -3,6 +3,7 @@
 //! the algorithm. Each module is named after its kind (`sph-flow` → [`sph_flow`]) and exports
 //! the kind's [`KindSpec`] (`SPEC`): ports, the check of its `[params]`, the files it reads, its
 //! entry point. [`registry`] lists them for the launcher and `sonoflow node <kind>`.
+//! [`flow_topics`] is shared by the two flow producers (particle snapshots, truth fields).
 
 use sonoflow_node_kit::KindSpec;
 
@@ -12,6 +13,7 @@ pub mod checker;
 pub mod doppler;
 pub mod evaluator;
 pub mod field_noise;
+pub mod flow_topics;
 pub mod gain;
 pub mod platelets;
 pub mod recorder;

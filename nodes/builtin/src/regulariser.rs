@@ -10,7 +10,7 @@ use sonoflow_messages::types::VectorField;
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{plane, MsgHeaderV1, VectorFieldHeaderV1, MAX_PLANES, VECTOR_REGULARISED};
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
+use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
 use sonoflow_regularise::{FieldRegulariser, PlaneRole};
 
 pub use sonoflow_regularise::field::{Method, WeightSource};
@@ -98,9 +98,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let mut out = kit.output::<VectorField>("regularised")?;
     kit.handshake(&mut [&mut input, &mut out])?;
     let mut planes = Vec::new();
-    let mut last_t = 0.0;
     let mut not_converged = 0u64;
-    for_each(&mut kit, &mut input, |kit, sample| {
+    transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
         let mut oh = reg.process(&h, sample.payload(), &mut planes)?;
@@ -114,20 +113,11 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
         }
         oh.common.compute_ns = process_cpu_ns() - t0;
-        out.publish_copy(oh, &planes)?;
-        kit.stats.messages_in += 1;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (planes.len() * 4) as u64;
-        kit.record(oh.common.frame_id, oh.common.t_valid, oh.common.compute_ns)?;
-        last_t = oh.common.t_valid;
-        Ok(Flow::Continue)
+        Ok(kit.publish_copy(out, oh, &planes)?)
     })?;
-    out.publish_eos(last_t)?;
     if not_converged > 0 {
         eprintln!("regulariser: {not_converged} frame(s) did not converge");
     }
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
     Ok(())
 }
 

@@ -9,7 +9,7 @@ use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
+use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
 use sonoflow_simus::{FramePlanner, Scan, ScanParams, Simus, SimusError};
 
 /// The `simus` node kind.
@@ -36,8 +36,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_el = probe.n_elements;
     let (mut xs, mut zs, mut rcs) = (Vec::new(), Vec::new(), Vec::new());
-    let mut last_t = 0.0;
-    for_each(&mut kit, &mut input, |kit, sample| {
+    transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
         xs.clear();
@@ -58,7 +57,6 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let pl = choice.plan;
         let plan_ns = process_cpu_ns() - t0;
-        kit.stats.messages_in += 1;
         for (tx_id, (angle, tx)) in transmits.iter().enumerate() {
             let t1 = process_cpu_ns();
             let mut rh = RfFrameHeaderV2 {
@@ -93,13 +91,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let compute = process_cpu_ns() - t1 + if tx_id == 0 { plan_ns } else { 0 };
             kit.published((n * 4) as u64, rh.common.frame_id, h.common.t_valid, compute)?;
         }
-        last_t = h.common.t_valid;
-        Ok(Flow::Continue)
-    })?;
-    out.publish_eos(last_t)?;
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
-    Ok(())
+        Ok(())
+    })
 }
 
 #[cfg(test)]

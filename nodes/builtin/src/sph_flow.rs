@@ -9,7 +9,8 @@ use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, Handshake, KindSpec};
 // The solver runs on rayon threads: its cost is the process CPU time (the node does nothing else).
 use sonoflow_node_kit::{process_cpu_ns as thread_cpu_ns, Kit, Output};
-use sonoflow_sph::producer::{Event, Prepared, Producer, ProducerParams, Snapshot, TruthField};
+use crate::flow_topics::{publish_fluid, publish_truth};
+use sonoflow_sph::producer::{Event, Prepared, Producer, ProducerParams};
 use sonoflow_sph::{Diagnostics, DtCriterion};
 
 /// The `sph-flow` node kind.
@@ -82,69 +83,6 @@ fn publish_stats(out: &mut Output<FlowStats>, d: &Diagnostics, frame_id: u64, cp
     Ok(())
 }
 
-/// A frame's fluid particles as `ParticleSnapshotV1`.
-fn publish_snapshot(out: &mut Output<ParticleSnapshot>, s: &Snapshot) -> anyhow::Result<()> {
-    let (n, ps) = (s.particles.len(), &s.particles);
-    if n > out.max_elements() {
-        anyhow::bail!(
-            "the flow has {n} fluid particles but topic `{}` allows max_elements = {}: raise it in the launch file",
-            out.topic(),
-            out.max_elements()
-        );
-    }
-    let mut h = ParticleSnapshotHeaderV1 {
-        n_particles: n as u32,
-        n_fluid: n as u32,
-        dt: s.dt,
-        bbox: s.bbox,
-        packet: s.at.packet,
-        frame_in_packet: s.at.frame_in_packet,
-        packet_size: s.packet_size,
-        ..Default::default()
-    };
-    h.common.frame_id = s.at.frame_id;
-    h.common.t_valid = s.at.t;
-    out.publish_in_place(n, h, |dst| {
-        for (i, d) in dst.iter_mut().enumerate() {
-            d.write(ParticleV1 {
-                id: ps.id[i],
-                kind: PARTICLE_FLUID,
-                x: ps.x[i],
-                z: ps.z[i],
-                vx: ps.vx[i],
-                vz: ps.vz[i],
-                amplitude: ps.amplitude[i],
-                reserved: 0.0,
-            });
-        }
-    })?;
-    Ok(())
-}
-
-/// A packet's ground truth as `VectorFieldV1` (planes vx, vz, mask).
-fn publish_truth(out: &mut Output<VectorField>, f: &TruthField) -> anyhow::Result<()> {
-    let (g, nn) = (&f.grid, f.truth.vx.len());
-    let mut vh = VectorFieldHeaderV1 {
-        grid: GridV1 { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx, nz: g.nz },
-        n_planes: 3,
-        source: VECTOR_TRUTH,
-        packet: f.packet,
-        converged: 1,
-        ..Default::default()
-    };
-    vh.plane_ids[..3].copy_from_slice(&[plane::VX, plane::VZ, plane::MASK]);
-    vh.common.frame_id = f.frame_id;
-    vh.common.t_valid = f.t;
-    out.publish_in_place(3 * nn, vh, |dst| {
-        for i in 0..nn {
-            dst[i].write(f.truth.vx[i]);
-            dst[nn + i].write(f.truth.vz[i]);
-            dst[2 * nn + i].write(f.truth.mask[i] as f32);
-        }
-    })?;
-    Ok(())
-}
-
 /// The node's outputs (`truth` and `stats` where wired).
 struct Ports {
     particles: Output<ParticleSnapshot>,
@@ -198,7 +136,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 }
             }
             Event::Snapshot(s) => {
-                publish_snapshot(&mut ports.particles, &s)?;
+                publish_fluid(&mut ports.particles, &s.at, s.packet_size, s.dt, s.bbox, &s.particles)?;
                 kit.stats.messages_out += 1;
                 kit.stats.bytes_out += (s.particles.len() * 32) as u64;
                 kit.record(s.at.frame_id, s.at.t, solver_cpu + (thread_cpu_ns() - t0))?;
@@ -208,7 +146,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
             Event::Truth(f) => {
                 if let Some(tout) = ports.truth.as_mut() {
-                    publish_truth(tout, &f)?;
+                    publish_truth(tout, &f.grid, &f.truth, f.packet, f.frame_id, f.t)?;
                     kit.stats.messages_out += 1;
                     kit.record(f.frame_id, f.t, thread_cpu_ns() - t0)?;
                 }

@@ -29,7 +29,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
-pub use receive::{for_each, select_loop, Flow, SelectEnd, Step, Wakeup};
+pub use receive::{for_each, select_loop, transform, Flow, SelectEnd, Step, Wakeup};
 use sonoflow_messages::types::{StageStats, WireMessage};
 use sonoflow_messages::{MessageType, MsgHeaderV1, StageStatsHeaderV1, FLAG_END_OF_STREAM};
 pub use spec::{in_range, parse_params, port, KindSpec, PortDir, PortSpec, STATS_TOPIC};
@@ -694,6 +694,26 @@ impl Kit {
         self.stats.messages_out += 1;
         self.stats.bytes_out += bytes;
         self.record(frame_id, t_valid, compute_ns)
+    }
+
+    /// Publishes a copy of `payload` under `header` on `out`, counts it and records its timing
+    /// (the header's frame id, time and `compute_ns`).
+    pub fn publish_copy<M: WireMessage>(
+        &mut self,
+        out: &mut Output<M>,
+        header: M::Header,
+        payload: &[M::Elem],
+    ) -> Result<(), KitError> {
+        out.publish_copy(header, payload)?;
+        let c = *M::common(&header);
+        self.published(std::mem::size_of_val(payload) as u64, c.frame_id, c.t_valid, c.compute_ns)
+    }
+
+    /// Ends a node whose input was `input`: its sequence gaps into the statistics, then
+    /// [`Kit::finish`].
+    pub fn finish_after<M: WireMessage>(mut self, input: &Input<M>) -> Result<NodeStats, KitError> {
+        self.stats.gaps = input.gaps;
+        self.finish()
     }
 
     /// Records one processed message (compute time measured by the caller) and publishes a

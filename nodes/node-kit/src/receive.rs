@@ -1,7 +1,7 @@
 //! The per-message loop of a node with one input: block on the input's event, hand every
 //! message to a handler, stop at end of stream or on a termination request.
 
-use crate::{is_eos, InSample, Input, Kit, KitError};
+use crate::{is_eos, InSample, Input, Kit, KitError, Output};
 use sonoflow_messages::WireMessage;
 use std::time::Duration;
 
@@ -35,6 +35,28 @@ where
         }
         input.wait(Duration::from_millis(200))?;
     }
+}
+
+/// The whole life of a node with one input and one output, after its handshake: runs `f` on
+/// every message of `input` (counted in; `f` publishes on `out`, e.g. with
+/// [`Kit::publish_copy`]) until end of stream or a termination request, then ends `out`'s stream
+/// at the time of the last message received and finishes the node ([`Kit::finish_after`]).
+pub fn transform<I, O, F>(mut kit: Kit, input: &mut Input<I>, out: &mut Output<O>, mut f: F) -> anyhow::Result<()>
+where
+    I: WireMessage,
+    O: WireMessage,
+    F: FnMut(&mut Kit, &mut Output<O>, &InSample<I>) -> anyhow::Result<()>,
+{
+    let mut last_t = 0.0;
+    for_each(&mut kit, input, |kit, sample| {
+        kit.stats.messages_in += 1;
+        last_t = I::common(sample.user_header()).t_valid;
+        f(kit, out, sample)?;
+        Ok(Flow::Continue)
+    })?;
+    out.publish_eos(last_t)?;
+    kit.finish_after(input)?;
+    Ok(())
 }
 
 /// What a [`select_loop`] body wants next.

@@ -112,8 +112,7 @@ fn run() -> Result<(), Error> {
     if let Some(m) = ports.maps.as_mut() {
         m.publish_eos(last_t)?;
     }
-    kit.stats.gaps = input.gaps;
-    kit.finish()?;
+    kit.finish_after(&input)?;
     Ok(())
 }
 
