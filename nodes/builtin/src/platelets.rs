@@ -29,17 +29,15 @@ use sonoflow_platelet::suspension::{
 use std::time::Duration;
 
 /// The `platelets` node kind.
-pub const SPEC: KindSpec = KindSpec {
-        name: "platelets",
-        about: "platelet suspension (paper 2, Algorithm 2: point particles with shape, trained coefficient networks) in an analytic carrier (straight or stenosed channel, shear) or in fluid snapshots on the input `particles` (SPH, interpolated onto a lattice; carrier type \"particles\"): platelet snapshots every few macro steps, with the time split advection / collisions / coefficients",
-        ports: &[port("particles", In, ParticleSnapshotV1, false), port("particles", Out, ParticleSnapshotV1, true)],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
-        validate,
-        check_wiring: Some(check_wiring),
-        input_files: &["weights"],
-        run,
-};
+pub const SPEC: KindSpec = KindSpec::new(
+    "platelets",
+    "platelet suspension (paper 2, Algorithm 2: point particles with shape, trained coefficient networks) in an analytic carrier (straight or stenosed channel, shear) or in fluid snapshots on the input `particles` (SPH, interpolated onto a lattice; carrier type \"particles\"): platelet snapshots every few macro steps, with the time split advection / collisions / coefficients",
+    &[port("particles", In, ParticleSnapshotV1, false), port("particles", Out, ParticleSnapshotV1, true)],
+    validate,
+    run,
+)
+.with_wiring_check(check_wiring)
+.with_input_files(&["weights"]);
 
 /// The node params, validated (without loading the weights, but checking that they exist).
 pub fn params(v: &serde_json::Value) -> Result<PlateletsParams, String> {

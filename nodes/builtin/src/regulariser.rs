@@ -17,17 +17,13 @@ pub use sonoflow_regularise::field::{Method, WeightSource};
 pub use sonoflow_regularise::RegulariserParams;
 
 /// The `regulariser` node kind.
-pub const SPEC: KindSpec = KindSpec {
-    name: "regulariser",
-    about: "robust unsupervised smoothing of vector fields (Garcia's smoothn): raw → regularised, with the S used and the outlier fraction",
-    ports: &[port("raw", In, VectorFieldV1, true), port("regularised", Out, VectorFieldV1, true)],
-    dynamic_inputs: false,
-    dynamic_outputs: false,
+pub const SPEC: KindSpec = KindSpec::new(
+    "regulariser",
+    "robust unsupervised smoothing of vector fields (Garcia's smoothn): raw → regularised, with the S used and the outlier fraction",
+    &[port("raw", In, VectorFieldV1, true), port("regularised", Out, VectorFieldV1, true)],
     validate,
-    check_wiring: None,
-    input_files: &[],
     run,
-};
+);
 
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<RegulariserParams>(v)?.validate().map_err(|e| e.to_string())

@@ -8,27 +8,24 @@ use sonoflow_messages::*;
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, Handshake, KindSpec};
 // The solver runs on rayon threads: its cost is the process CPU time (the node does nothing else).
-use sonoflow_node_kit::{process_cpu_ns as thread_cpu_ns, Kit, Output};
 use crate::flow_topics::{publish_fluid, publish_truth};
+use sonoflow_node_kit::{process_cpu_ns as thread_cpu_ns, Kit, Output};
 use sonoflow_sph::producer::{Event, Prepared, Producer, ProducerParams};
 use sonoflow_sph::{Diagnostics, DtCriterion};
 
 /// The `sph-flow` node kind.
-pub const SPEC: KindSpec = KindSpec {
-        name: "sph-flow",
-        about: "weakly compressible SPH blood flow (paper 1 §2.1–2.2) in a vessel geometry (carotid bifurcation preset): fluid particles = scatterers at the acquisition times, SPH-interpolated ground truth, solver diagnostics",
-        ports: &[
+pub const SPEC: KindSpec = KindSpec::new(
+    "sph-flow",
+    "weakly compressible SPH blood flow (paper 1 §2.1–2.2) in a vessel geometry (carotid bifurcation preset): fluid particles = scatterers at the acquisition times, SPH-interpolated ground truth, solver diagnostics",
+    &[
             port("particles", Out, ParticleSnapshotV1, true),
             port("truth", Out, VectorFieldV1, false),
             port("stats", Out, FlowStatsV1, false),
         ],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
-        validate,
-        check_wiring: None,
-        input_files: &["checkpoint_in"],
-        run,
-};
+    validate,
+    run,
+)
+.with_input_files(&["checkpoint_in"]);
 
 /// Parses and checks the node parameters (without building the particles).
 pub fn prepare(v: &serde_json::Value) -> Result<Prepared, String> {

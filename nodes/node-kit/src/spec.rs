@@ -249,21 +249,17 @@ mod tests {
         parse_params::<Params>(v).map(|_| ())
     }
 
-    const SPEC: KindSpec = KindSpec {
-        name: "test",
-        about: "a test kind",
-        ports: &[
+    const SPEC: KindSpec = KindSpec::new(
+        "test",
+        "a test kind",
+        &[
             port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
             port("iq_in", PortDir::In, MessageType::IqFrameV2, false),
             port("rf_in", PortDir::Out, MessageType::RfFrameV2, true),
         ],
-        dynamic_inputs: false,
-        dynamic_outputs: false,
         validate,
-        check_wiring: None,
-        input_files: &[],
         run,
-    };
+    );
 
     #[test]
     fn kind_spec_finds_ports_by_name_and_direction() {
