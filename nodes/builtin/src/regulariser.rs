@@ -88,7 +88,7 @@ impl Regulariser {
 
 pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: RegulariserParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
-    let max_iter = p.max_iter;
+    let max_iter = p.smoothn.max_iter;
     let mut reg = Regulariser::new(p).map_err(anyhow::Error::msg)?;
     let mut input = kit.input::<VectorField>("raw")?;
     let mut out = kit.output::<VectorField>("regularised")?;
@@ -156,7 +156,7 @@ mod tests {
         let mut p = RegulariserParams { weights: WeightSource::Power, ..Default::default() };
         let e = Regulariser::new(p.clone()).unwrap().process(&h, &v, &mut Vec::new()).unwrap_err().to_string();
         assert!(e.contains("no `power` plane"), "{e}");
-        p.order = 7;
+        p.smoothn.order = 7;
         assert!(Regulariser::new(p).err().unwrap().contains("order"));
         let e = validate(&serde_json::json!({"power_mask_db": 5.0})).unwrap_err();
         assert!(e.contains("power_mask_db") && e.contains("-100 ..= 0"), "{e}");

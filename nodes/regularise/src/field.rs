@@ -28,8 +28,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    wall_from_power, DivFree, DivFreeError, DivFreeParams, Flavour, NoSlipParams, Smoothn, SmoothnError, SmoothnParams,
-    WeightFunction,
+    wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams, Smoothn, SmoothnError, SmoothnParams,
 };
 
 /// Which regulariser.
@@ -58,26 +57,17 @@ pub enum WeightSource {
     Power,
 }
 
-/// Parameters of [`FieldRegulariser`] (the `regulariser` node's parameters; the smoothn ones are
-/// named as in [`SmoothnParams`], which [`Self::smoothn`] builds). Every field has a default;
-/// unknown fields are rejected.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
+/// Parameters of [`FieldRegulariser`] (the `regulariser` node's parameters). The smoothing is
+/// [`SmoothnParams`] itself, whose fields stand at the top level of the table (`s`, `order`,
+/// `robust`, `weight_function`, `tol_z`, `max_iter`, `flavour`; `spacing` is not a parameter:
+/// it comes from each frame's grid). `robust` defaults to true here (paper 1 smooths robustly).
+/// Every field has a default; unknown fields are rejected, and errors name the field.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(remote = "Self", deny_unknown_fields, default)]
 pub struct RegulariserParams {
-    /// Smoothing parameter S (> 0); absent: chosen per frame by generalised cross-validation.
-    pub s: Option<f64>,
-    /// Penalty order: 1, 2 or 3.
-    pub order: u32,
-    /// Robust (iteratively re-weighted) smoothing, as paper 1 uses. Default true.
-    pub robust: bool,
-    /// Robust weight function: bisquare, cauchy or talworth.
-    pub weight_function: WeightFunction,
-    /// Relative tolerance on the smoothed field between iterations, in (0, 1).
-    pub tol_z: f64,
-    /// Iteration limit per robust pass (≥ 1).
-    pub max_iter: u32,
-    /// `matlab` (default) or `pymust`.
-    pub flavour: Flavour,
+    /// The smoothn parameters (top-level keys of the table, see above).
+    #[serde(skip)]
+    pub smoothn: SmoothnParams,
     /// Weight source.
     pub weights: WeightSource,
     /// Treat pixels outside the `mask` plane as missing and zero them on output.
@@ -98,17 +88,66 @@ pub struct RegulariserParams {
     pub no_slip: Option<NoSlipParams>,
 }
 
+/// The keys of a `regulariser` table that belong to [`SmoothnParams`].
+const SMOOTHN_KEYS: [&str; 7] = ["s", "order", "robust", "weight_function", "tol_z", "max_iter", "flavour"];
+
+/// Deserialises `table` as `T`; an error is (path inside the table, message), as the node kit
+/// reports them.
+fn from_table<T: serde::de::DeserializeOwned>(
+    table: serde_json::Map<String, serde_json::Value>,
+) -> Result<T, (String, String)> {
+    serde_path_to_error::deserialize(serde_json::Value::Object(table))
+        .map_err(|e| (e.path().to_string(), e.inner().to_string()))
+}
+
+/// "path: message" (just the message at the top).
+fn with_path((path, msg): (String, String)) -> String {
+    if path == "." {
+        msg
+    } else {
+        format!("{path}: {msg}")
+    }
+}
+
+impl<'de> Deserialize<'de> for RegulariserParams {
+    /// Splits the table into smoothn's keys (deserialised as [`SmoothnParams`], with
+    /// `robust = true` unless given) and the rest (this struct's own fields).
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut table = serde_json::Map::<String, serde_json::Value>::deserialize(d)?;
+        let mut smoothn = serde_json::Map::new();
+        smoothn.insert("robust".into(), true.into());
+        for k in SMOOTHN_KEYS {
+            if let Some(v) = table.remove(k) {
+                smoothn.insert(k.into(), v);
+            }
+        }
+        let own = from_table::<Own>(table).map_err(|(path, msg)| {
+            let top_level_key = !path.contains(['.', '[']);
+            if top_level_key && msg.starts_with("unknown field") {
+                D::Error::custom(format!("{msg}, or one of smoothn's `{}`", SMOOTHN_KEYS.join("`, `")))
+            } else {
+                D::Error::custom(with_path((path, msg)))
+            }
+        })?;
+        let smoothn = from_table(smoothn).map_err(|e| D::Error::custom(with_path(e)))?;
+        Ok(Self { smoothn, ..own.0 })
+    }
+}
+
+/// This struct's own fields, through the derived (remote) deserialiser.
+struct Own(RegulariserParams);
+
+impl<'de> Deserialize<'de> for Own {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        RegulariserParams::deserialize(d).map(Own)
+    }
+}
+
 impl Default for RegulariserParams {
     fn default() -> Self {
-        let d = SmoothnParams::default();
         Self {
-            s: d.s,
-            order: d.order,
-            robust: true,
-            weight_function: d.weight_function,
-            tol_z: d.tol_z,
-            max_iter: d.max_iter,
-            flavour: d.flavour,
+            smoothn: SmoothnParams { robust: true, ..SmoothnParams::default() },
             weights: WeightSource::Auto,
             mask: true,
             method: Method::Smoothn,
@@ -135,16 +174,7 @@ impl RegulariserParams {
 
     /// The smoothn parameters for a grid with spacing (dz, dx).
     pub fn smoothn(&self, spacing: Option<[f64; 2]>) -> SmoothnParams {
-        SmoothnParams {
-            s: self.s,
-            order: self.order,
-            robust: self.robust,
-            weight_function: self.weight_function,
-            tol_z: self.tol_z,
-            max_iter: self.max_iter,
-            spacing: spacing.map(|s| s.to_vec()),
-            flavour: self.flavour,
-        }
+        SmoothnParams { spacing: spacing.map(|s| s.to_vec()), ..self.smoothn.clone() }
     }
 }
 

@@ -6,6 +6,7 @@
 use sonoflow_regularise::field::{Method, WeightSource};
 use sonoflow_regularise::{
     DivFreeParams, FieldRegulariser, FieldReport, NoSlipParams, PlaneRole, PlaneRole::*, RegulariserParams,
+    SmoothnParams,
 };
 
 /// A linear field on an `nz × nx` grid (spacing 0.1 mm): `vx` in the first plane, `vz` in the
@@ -41,7 +42,14 @@ fn needs_vx_and_vz_planes_of_the_grid() {
     let p = RegulariserParams { weights: WeightSource::Power, ..Default::default() };
     let e = process(p.clone(), [6, 8], &[Vx, Vz], &v).unwrap_err().to_string();
     assert!(e.contains("no `power` plane"), "{e}");
-    let e = process(RegulariserParams { order: 7, ..p }, [6, 8], &[Vx, Vz], &v).unwrap_err().to_string();
+    let e = process(
+        RegulariserParams { smoothn: SmoothnParams { order: 7, ..p.smoothn.clone() }, ..p },
+        [6, 8],
+        &[Vx, Vz],
+        &v,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("order"), "{e}");
 }
 
@@ -59,7 +67,8 @@ fn linear_field_is_kept_masked_pixels_zeroed_and_flagged_pixels_filled() {
     v[3 * n + 25] = 1.0; // no estimate: value is junk
     v[25] = 50.0;
     v[n + 25] = -50.0;
-    let p = RegulariserParams { s: Some(0.5), robust: false, ..Default::default() };
+    let p =
+        RegulariserParams { smoothn: SmoothnParams { s: Some(0.5), ..SmoothnParams::default() }, ..Default::default() };
     let (r, out) = process(p, [10, 12], &[Vx, Vz, Mask, Flags], &v).unwrap();
     assert_eq!((r.s, r.converged), (0.5, true));
     for i in 0..n {
@@ -85,7 +94,8 @@ fn nothing_measured_gives_zeros_not_nan() {
 fn weight_plane_is_used_as_weights() {
     // Half the pixels carry a wrong value with weight 0: the result ignores them entirely.
     let n = 80;
-    let p = RegulariserParams { s: Some(0.5), robust: false, ..Default::default() };
+    let p =
+        RegulariserParams { smoothn: SmoothnParams { s: Some(0.5), ..SmoothnParams::default() }, ..Default::default() };
     let (_, reference) = process(p.clone(), [8, 10], &[Vx, Vz], &field(10, 8, 2)).unwrap();
     let mut v = field(10, 8, 3);
     for i in 0..n {
@@ -208,8 +218,11 @@ fn parameters_from_toml_defaults_and_checks() {
     assert_eq!((sp.s, sp.order, sp.robust, sp.tol_z, sp.max_iter), (Some(2.0), 2, true, 1e-4, 50));
     assert_eq!(sp.spacing, Some(vec![2e-4, 1e-4]));
     let d = RegulariserParams::default();
-    assert!(d.robust && d.mask && d.weights == WeightSource::Auto && d.method == Method::Smoothn);
-    assert_eq!((d.s, d.order, d.tol_z, d.max_iter, d.power_mask_db, d.no_slip), (None, 2, 1e-3, 100, -15.0, None));
+    assert!(d.smoothn.robust && d.mask && d.weights == WeightSource::Auto && d.method == Method::Smoothn);
+    assert_eq!(
+        (d.smoothn.s, d.smoothn.order, d.smoothn.tol_z, d.smoothn.max_iter, d.power_mask_db, d.no_slip),
+        (None, 2, 1e-3, 100, -15.0, None)
+    );
     assert!(toml::from_str::<RegulariserParams>("spacing = [1.0, 1.0]").is_err(), "not a node parameter");
     let check = |t: &str| toml::from_str::<RegulariserParams>(t).unwrap().validate().unwrap_err().to_string();
     let e = check("power_mask_db = 5.0");
@@ -221,4 +234,23 @@ fn parameters_from_toml_defaults_and_checks() {
     assert!(check("s = 0.0").contains("`s` = 0"));
     assert!(check("order = 5").contains("1, 2 or 3"));
     assert!(toml::from_str::<RegulariserParams>("no_slip = { wall = 3.0 }").is_err());
+}
+
+/// The smoothn keys of the table are `SmoothnParams` itself (no copy): values and errors come
+/// from it; `robust` defaults to true unless given; an unknown key's error lists both sets of
+/// keys; errors inside a nested table keep their path.
+#[test]
+fn smoothn_keys_deserialise_into_smoothn_params() {
+    let p: RegulariserParams = toml::from_str("order = 3\ntol_z = 0.01\nmax_iter = 7\nmask = false").unwrap();
+    let expect = SmoothnParams { order: 3, tol_z: 0.01, max_iter: 7, robust: true, ..SmoothnParams::default() };
+    assert_eq!(p.smoothn, expect);
+    assert!(!p.mask);
+    let p: RegulariserParams = toml::from_str("robust = false").unwrap();
+    assert!(!p.smoothn.robust, "a given robust is kept");
+    let e = toml::from_str::<RegulariserParams>("ordr = 2").unwrap_err().to_string();
+    assert!(e.contains("unknown field `ordr`") && e.contains("`power_mask_db`") && e.contains("`max_iter`"), "{e}");
+    let e = toml::from_str::<RegulariserParams>("max_iter = \"many\"").unwrap_err().to_string();
+    assert!(e.contains("max_iter: invalid type: string \"many\""), "{e}");
+    let e = toml::from_str::<RegulariserParams>("divergence_free = { cv_blok = 8 }").unwrap_err().to_string();
+    assert!(e.contains("divergence_free") && e.contains("unknown field `cv_blok`"), "{e}");
 }
