@@ -316,7 +316,7 @@ fn regulariser_node_equals_the_library_and_removes_outliers() {
     let (truth, raw, reg) = (read_topic(&rec, "truth"), read_topic(&rec, "raw"), read_topic(&rec, "regularised"));
     assert_eq!((truth.len(), raw.len(), reg.len()), (8, 8, 8));
     // The launch file's regulariser parameters.
-    let params = RegulariserParams { robust: true, order: 2, ..Default::default() };
+    let params = RegulariserParams::default(); // robust, order 2
     let mut lib = Regulariser::new(params).unwrap();
     let mut expect = Vec::new();
     for k in 0..8 {

@@ -81,6 +81,19 @@ impl Particles {
     pub fn is_empty(&self) -> bool {
         self.id.is_empty()
     }
+
+    /// Bounding box of the positions, `[xmin, xmax, zmin, zmax]` (m); `[MAX, MIN, MAX, MIN]` of
+    /// f32 when there are no particles.
+    pub fn bbox(&self) -> [f32; 4] {
+        let (mut xmin, mut xmax, mut zmin, mut zmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+        for (&x, &z) in self.x.iter().zip(&self.z) {
+            xmin = xmin.min(x);
+            xmax = xmax.max(x);
+            zmin = zmin.min(z);
+            zmax = zmax.max(z);
+        }
+        [xmin, xmax, zmin, zmax]
+    }
 }
 
 /// Parameters of an [`AnalyticFlow`].

@@ -71,15 +71,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let t0 = thread_cpu_ns();
         flow.advance_to(at.t)?;
-        let ps = flow.particles();
-        let (mut xmin, mut xmax, mut zmin, mut zmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
-        for i in 0..n {
-            xmin = xmin.min(ps.x[i]);
-            xmax = xmax.max(ps.x[i]);
-            zmin = zmin.min(ps.z[i]);
-            zmax = zmax.max(ps.z[i]);
-        }
-        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, [xmin, xmax, zmin, zmax], ps)?;
+        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, flow.particles())?;
         let compute = thread_cpu_ns() - t0;
         kit.published((n * 32) as u64, at.frame_id, at.t, compute)?;
         last_t = at.t;

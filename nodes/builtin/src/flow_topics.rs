@@ -8,14 +8,13 @@ use sonoflow_messages::*;
 use sonoflow_node_kit::Output;
 
 /// Publishes the fluid particles `ps` of frame `at` (of a schedule with `packet_size` frames per
-/// packet; `dt` the solver step, 0 for an analytic flow; `bbox` = [xmin, xmax, zmin, zmax]).
+/// packet; `dt` the solver step, 0 for an analytic flow) with their bounding box.
 /// An error naming the topic if they do not fit its `max_elements`.
 pub fn publish_fluid(
     out: &mut Output<ParticleSnapshot>,
     at: &AcquisitionTime,
     packet_size: u32,
     dt: f64,
-    bbox: [f32; 4],
     ps: &Particles,
 ) -> anyhow::Result<()> {
     let n = ps.len();
@@ -30,7 +29,7 @@ pub fn publish_fluid(
         n_particles: n as u32,
         n_fluid: n as u32,
         dt,
-        bbox,
+        bbox: ps.bbox(),
         packet: at.packet,
         frame_in_packet: at.frame_in_packet,
         packet_size,

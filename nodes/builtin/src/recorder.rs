@@ -14,7 +14,7 @@ use sonoflow_messages::MessageType;
 use sonoflow_node_kit::KindSpec;
 use sonoflow_node_kit::{in_range, parse_params};
 use sonoflow_node_kit::{select_loop, unix_ns, DynInput, Kit, SelectEnd, Step};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// The `recorder` node kind.
@@ -103,40 +103,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: RecorderParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     p.validate().map_err(anyhow::Error::msg)?;
     let path = PathBuf::from(kit.cfg.out_dir.clone().unwrap_or_else(|| ".".into())).join(&p.path);
-    let opts = WriterOptions {
-        compression: p.compression,
-        compression_level: p.compression_level,
-        chunk_size: (p.chunk_size_mb * 1048576.0) as u64,
-        flush_interval: Duration::from_secs_f64(p.flush_interval_s),
-        queue_bytes: (p.queue_mb * 1048576.0) as usize,
-        ..WriterOptions::default()
-    };
-    let mut file = TopicRecorder::create(&path, opts)?;
-    let (mut rec, mut stats_publishers) = (Vec::<Recorded>::new(), 0usize);
-    for (port, qos) in &kit.cfg.inputs.clone() {
-        let is_stats = port == sonoflow_node_kit::STATS_TOPIC;
-        if is_stats && !p.stats {
-            continue;
-        }
-        if is_stats {
-            stats_publishers = qos.max_publishers;
-        }
-        let kind = MessageType::parse(&qos.message_type).map_err(anyhow::Error::msg)?;
-        let index = file.add_topic(&qos.topic, kind, p.viz && !is_stats)?;
-        rec.push(Recorded { input: kit.dyn_input(qos)?, index, is_stats, count: TopicCount::default() });
-    }
-    if let Some(lf) = &p.launch_file {
-        match std::fs::read(lf) {
-            Ok(data) => file.attach("launch.toml", "application/toml", data)?,
-            Err(e) => eprintln!("recorder: cannot attach launch file {lf}: {e}"),
-        }
-    }
-    let run_md = [
-        ("run_id", kit.cfg.run_id.clone()),
-        ("sonoflow_version", env!("CARGO_PKG_VERSION").to_string()),
-        ("started_unix_ns", unix_ns().to_string()),
-    ];
-    file.metadata("run", run_md.into_iter().map(|(k, v)| (k.to_string(), v)).collect())?;
+    let (mut file, mut rec, stats_publishers) = open(&mut kit, &p, &path)?;
     {
         let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> =
             rec.iter_mut().map(|r| r.input.as_mut() as &mut dyn sonoflow_node_kit::Handshake).collect();
@@ -172,6 +139,47 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     kit.stats.bytes_out = s.stats.file_bytes;
     kit.finish()?;
     Ok(())
+}
+
+/// The recording file with its channels (one per input; the stage statistics unless
+/// `stats = false`), the launch file attached and the run's metadata; the inputs; how many
+/// publishers the statistics topic has.
+fn open(kit: &mut Kit, p: &RecorderParams, path: &Path) -> anyhow::Result<(TopicRecorder, Vec<Recorded>, usize)> {
+    let opts = WriterOptions {
+        compression: p.compression,
+        compression_level: p.compression_level,
+        chunk_size: (p.chunk_size_mb * 1048576.0) as u64,
+        flush_interval: Duration::from_secs_f64(p.flush_interval_s),
+        queue_bytes: (p.queue_mb * 1048576.0) as usize,
+        ..WriterOptions::default()
+    };
+    let mut file = TopicRecorder::create(path, opts)?;
+    let (mut rec, mut stats_publishers) = (Vec::<Recorded>::new(), 0usize);
+    for (port, qos) in &kit.cfg.inputs.clone() {
+        let is_stats = port == sonoflow_node_kit::STATS_TOPIC;
+        if is_stats && !p.stats {
+            continue;
+        }
+        if is_stats {
+            stats_publishers = qos.max_publishers;
+        }
+        let kind = MessageType::parse(&qos.message_type).map_err(anyhow::Error::msg)?;
+        let index = file.add_topic(&qos.topic, kind, p.viz && !is_stats)?;
+        rec.push(Recorded { input: kit.dyn_input(qos)?, index, is_stats, count: TopicCount::default() });
+    }
+    if let Some(lf) = &p.launch_file {
+        match std::fs::read(lf) {
+            Ok(data) => file.attach("launch.toml", "application/toml", data)?,
+            Err(e) => eprintln!("recorder: cannot attach launch file {lf}: {e}"),
+        }
+    }
+    let run_md = [
+        ("run_id", kit.cfg.run_id.clone()),
+        ("sonoflow_version", env!("CARGO_PKG_VERSION").to_string()),
+        ("started_unix_ns", unix_ns().to_string()),
+    ];
+    file.metadata("run", run_md.into_iter().map(|(k, v)| (k.to_string(), v)).collect())?;
+    Ok((file, rec, stats_publishers))
 }
 
 /// Receives at most one message from every input into the file; false when none had one.

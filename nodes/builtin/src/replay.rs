@@ -8,10 +8,10 @@
 
 use serde::{Deserialize, Serialize};
 use sonoflow_mcap_io::{McapReader, ReadOptions};
-use sonoflow_messages::{cdr, MessageType, FLAG_REPLAYED, FLAG_RESET};
+use sonoflow_messages::{cdr, MessageType, MsgHeaderV1, FLAG_REPLAYED, FLAG_RESET};
 use sonoflow_node_kit::parse_params;
 use sonoflow_node_kit::KindSpec;
-use sonoflow_node_kit::{thread_cpu_ns, DynOutput, Kit};
+use sonoflow_node_kit::{thread_cpu_ns, DynOutput, Handshake, Kit};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -70,10 +70,47 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: ReplayParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     p.validate().map_err(anyhow::Error::msg)?;
     let reader = McapReader::open(Path::new(&p.path))?;
+    let mut outs = open_outputs(&mut kit, &p, &reader)?;
+    {
+        let mut hs: Vec<&mut dyn Handshake> =
+            outs.values_mut().map(|(_, o)| o.as_mut() as &mut dyn Handshake).collect();
+        kit.handshake(&mut hs)?;
+    }
+    let topics: Vec<String> = outs.keys().cloned().collect();
+    // First log time, for the start offset and pacing.
+    let first = reader
+        .messages(&ReadOptions { topics: Some(topics.clone()), start_time: None, end_time: None })?
+        .next()
+        .transpose()?
+        .map(|m| m.log_time)
+        .unwrap_or(0);
+    let total =
+        reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
+    if let Some(w) = unfinished_warning(&reader, total) {
+        eprintln!("{w}");
+    }
+    let mut play =
+        Playback { start_time: first + (p.start_offset_s * 1e9) as u64, total, sent: 0, last_t: 0.0, lap: 0 };
+    while play.lap(&mut kit, &p, &reader, &topics, &mut outs)? {
+        play.lap += 1;
+        if p.loops != 0 && play.lap >= p.loops {
+            break;
+        }
+    }
+    for (_, o) in outs.values_mut() {
+        o.eos(play.last_t)?;
+    }
+    println!("replay: {} messages from {}", play.sent, p.path);
+    kit.finish()?;
+    Ok(())
+}
+
+/// The node's outputs by recorded topic; an error names a topic that is not in the recording or
+/// whose recorded schema differs from the graph topic's type (or is a retired wire version).
+fn open_outputs(kit: &mut Kit, p: &ReplayParams, reader: &McapReader) -> anyhow::Result<Outputs> {
     let recorded: BTreeMap<String, String> = reader.topics().into_iter().map(|t| (t.topic, t.schema_name)).collect();
-    let outputs_cfg = kit.cfg.outputs.clone();
-    let mut outs: BTreeMap<String, (MessageType, Box<dyn DynOutput>)> = BTreeMap::new();
-    for (rec_topic, qos) in &outputs_cfg {
+    let mut outs = Outputs::new();
+    for (rec_topic, qos) in &kit.cfg.outputs.clone() {
         let kind = MessageType::from_name(&qos.message_type)
             .ok_or_else(|| anyhow::anyhow!("unknown message type {}", qos.message_type))?;
         match recorded.get(rec_topic) {
@@ -94,43 +131,44 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         outs.insert(rec_topic.clone(), (kind, kit.dyn_output(qos)?));
     }
-    {
-        let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> =
-            outs.values_mut().map(|(_, o)| o.as_mut() as &mut dyn sonoflow_node_kit::Handshake).collect();
-        kit.handshake(&mut hs)?;
-    }
-    let topics: Vec<String> = outs.keys().cloned().collect();
-    // First log time, for the start offset and pacing.
-    let first = reader
-        .messages(&ReadOptions { topics: Some(topics.clone()), start_time: None, end_time: None })?
-        .next()
-        .transpose()?
-        .map(|m| m.log_time)
-        .unwrap_or(0);
-    let start_time = first + (p.start_offset_s * 1e9) as u64;
-    let total =
-        reader.topics().iter().filter(|t| topics.contains(&t.topic)).filter_map(|t| t.message_count).sum::<u64>();
-    if let Some(w) = unfinished_warning(&reader, total) {
-        eprintln!("{w}");
-    }
-    let mut sent = 0u64;
-    let mut last_t = 0.0;
-    let mut lap = 0u32;
-    'outer: loop {
+    Ok(outs)
+}
+
+/// Recorded topic → (its type, the graph output it is published on).
+type Outputs = BTreeMap<String, (MessageType, Box<dyn DynOutput>)>;
+
+/// Where a replay stands.
+struct Playback {
+    /// Log time of the first message played \[ns\].
+    start_time: u64,
+    /// Messages per lap on the replayed topics.
+    total: u64,
+    sent: u64,
+    last_t: f64,
+    lap: u32,
+}
+
+impl Playback {
+    /// Plays the file once (paced by `rate`); false if a termination request stopped it.
+    fn lap(
+        &mut self,
+        kit: &mut Kit,
+        p: &ReplayParams,
+        reader: &McapReader,
+        topics: &[String],
+        outs: &mut Outputs,
+    ) -> anyhow::Result<bool> {
         let t_start = Instant::now();
         let mut first_of_lap = true;
-        for m in reader.messages(&ReadOptions {
-            topics: Some(topics.clone()),
-            start_time: Some(start_time),
-            end_time: None,
-        })? {
+        let opts = ReadOptions { topics: Some(topics.to_vec()), start_time: Some(self.start_time), end_time: None };
+        for m in reader.messages(&opts)? {
             let m = m?;
             if kit.check_termination().is_err() {
-                break 'outer;
+                return Ok(false);
             }
             let Some((kind, out)) = outs.get_mut(&m.topic) else { continue };
             if p.rate > 0.0 {
-                let due = Duration::from_secs_f64((m.log_time.saturating_sub(start_time)) as f64 / 1e9 / p.rate);
+                let due = Duration::from_secs_f64((m.log_time.saturating_sub(self.start_time)) as f64 / 1e9 / p.rate);
                 let el = t_start.elapsed();
                 if due > el {
                     std::thread::sleep(due - el);
@@ -138,32 +176,22 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
             let t0 = thread_cpu_ns();
             let (header, payload) = cdr::split(*kind, &m.data)?;
-            let c: sonoflow_messages::MsgHeaderV1 =
-                bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<sonoflow_messages::MsgHeaderV1>()]);
+            let c: MsgHeaderV1 = bytemuck::pod_read_unaligned(&header[..std::mem::size_of::<MsgHeaderV1>()]);
             let mut flags = FLAG_REPLAYED;
-            if first_of_lap && lap > 0 {
+            if first_of_lap && self.lap > 0 {
                 flags |= FLAG_RESET;
             }
             first_of_lap = false;
             out.publish_bytes(header, payload, flags)?;
-            last_t = c.t_valid;
-            sent += 1;
+            self.last_t = c.t_valid;
+            self.sent += 1;
             kit.published(payload.len() as u64, c.frame_id, c.t_valid, thread_cpu_ns() - t0)?;
-            if total > 0 && sent.is_multiple_of((total / 20).max(1)) {
-                kit.progress(sent, total * p.loops.max(1) as u64);
+            if self.total > 0 && self.sent.is_multiple_of((self.total / 20).max(1)) {
+                kit.progress(self.sent, self.total * p.loops.max(1) as u64);
             }
         }
-        lap += 1;
-        if p.loops != 0 && lap >= p.loops {
-            break;
-        }
+        Ok(true)
     }
-    for (_, o) in outs.values_mut() {
-        o.eos(last_t)?;
-    }
-    println!("replay: {sent} messages from {}", p.path);
-    kit.finish()?;
-    Ok(())
 }
 
 /// The warning for a recording without a summary (its recorder was killed, or the copy was cut

@@ -7,10 +7,10 @@
 
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::{RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
+use sonoflow_messages::{ParticleSnapshotHeaderV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
-use sonoflow_simus::{FramePlanner, Scan, ScanParams, Simus, SimusError};
+use sonoflow_simus::{FramePlanner, FrequencyPlan, Scan, ScanParams, Simus, SimusError};
 
 /// The `simus` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -29,12 +29,11 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: ScanParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     let scan = p.scan(MAX_TX_ELEMENTS).map_err(anyhow::Error::msg)?;
     let mut planner = FramePlanner::new(&p, &scan);
-    let Scan { probe, transmits } = scan;
-    let mut simus = Simus::new(probe.clone(), p.medium.clone(), p.options.clone())?;
+    let mut simus = Simus::new(scan.probe.clone(), p.medium.clone(), p.options.clone())?;
     let mut input = kit.input::<ParticleSnapshot>("particles")?;
     let mut out = kit.output::<RfFrame>("rf")?;
     kit.handshake(&mut [&mut input, &mut out])?;
-    let n_el = probe.n_elements;
+    let n_el = scan.probe.n_elements;
     let (mut xs, mut zs, mut rcs) = (Vec::new(), Vec::new(), Vec::new());
     transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
@@ -57,30 +56,9 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let pl = choice.plan;
         let plan_ns = process_cpu_ns() - t0;
-        for (tx_id, (angle, tx)) in transmits.iter().enumerate() {
+        for (tx_id, (_, tx)) in scan.transmits.iter().enumerate() {
             let t1 = process_cpu_ns();
-            let mut rh = RfFrameHeaderV2 {
-                fs: pl.fs,
-                t0: pl.t0,
-                fc: probe.fc,
-                c: p.medium.c,
-                pitch: probe.pitch,
-                tx_angle: *angle,
-                prf: p.prf,
-                element_width: Some(probe.element_width()).filter(|w| w.is_finite()).unwrap_or(0.0),
-                n_channels: n_el as u32,
-                n_samples: pl.n_samples as u32,
-                tx_id: tx_id as u32,
-                sample_format: SAMPLE_RF_F32,
-                packet: h.packet,
-                frame_in_packet: h.frame_in_packet,
-                ..Default::default()
-            };
-            for e in 0..n_el {
-                rh.tx_delays[e] = tx.delays[e] as f32;
-            }
-            rh.common.frame_id = h.common.frame_id * transmits.len() as u64 + tx_id as u64;
-            rh.common.t_valid = h.common.t_valid;
+            let rh = rf_header(&p, &scan, &pl, &h, tx_id);
             let n = n_el * pl.n_samples;
             let r = out.publish_init(n, rh, |buf, hdr| {
                 simus.simulate_into(scat, tx, &pl, buf)?;
@@ -93,6 +71,42 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         Ok(())
     })
+}
+
+/// The header of transmit `tx_id`'s RF frame for the particle snapshot `h`: the frame's sampling
+/// (`pl`), the probe and medium, the transmit (tilt, delays), the packet position; frame ids
+/// count transmits within frames.
+fn rf_header(
+    p: &ScanParams,
+    scan: &Scan,
+    pl: &FrequencyPlan,
+    h: &ParticleSnapshotHeaderV1,
+    tx_id: usize,
+) -> RfFrameHeaderV2 {
+    let (probe, (angle, tx)) = (&scan.probe, &scan.transmits[tx_id]);
+    let mut rh = RfFrameHeaderV2 {
+        fs: pl.fs,
+        t0: pl.t0,
+        fc: probe.fc,
+        c: p.medium.c,
+        pitch: probe.pitch,
+        tx_angle: *angle,
+        prf: p.prf,
+        element_width: Some(probe.element_width()).filter(|w| w.is_finite()).unwrap_or(0.0),
+        n_channels: probe.n_elements as u32,
+        n_samples: pl.n_samples as u32,
+        tx_id: tx_id as u32,
+        sample_format: SAMPLE_RF_F32,
+        packet: h.packet,
+        frame_in_packet: h.frame_in_packet,
+        ..Default::default()
+    };
+    for (d, &t) in rh.tx_delays.iter_mut().zip(&tx.delays) {
+        *d = t as f32;
+    }
+    rh.common.frame_id = h.common.frame_id * scan.transmits.len() as u64 + tx_id as u64;
+    rh.common.t_valid = h.common.t_valid;
+    rh
 }
 
 #[cfg(test)]

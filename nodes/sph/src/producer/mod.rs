@@ -269,13 +269,6 @@ impl Producer {
     fn snapshot(&self, at: AcquisitionTime) -> Snapshot {
         let ps = &self.solver.particles;
         let idx: Vec<usize> = (0..ps.len()).filter(|&i| ps.kind[i] == ParticleKind::Fluid).collect();
-        let (mut xmin, mut xmax, mut zmin, mut zmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
-        for &i in &idx {
-            xmin = xmin.min(ps.x[i] as f32);
-            xmax = xmax.max(ps.x[i] as f32);
-            zmin = zmin.min(ps.z[i] as f32);
-            zmax = zmax.max(ps.z[i] as f32);
-        }
         let (seed, sigma) = (self.params.seed, self.params.amplitude_sigma);
         let particles = Scatterers {
             id: idx.iter().map(|&i| ps.id[i] as u32).collect(),
@@ -289,7 +282,7 @@ impl Producer {
             at,
             packet_size: self.params.schedule.packet_size,
             dt: self.solver.last_step().map_or(0.0, |r| r.dt),
-            bbox: [xmin, xmax, zmin, zmax],
+            bbox: particles.bbox(),
             particles,
             progress: self.progress(),
         }
