@@ -1,0 +1,195 @@
+//! A run's evaluation as its messages arrive, in any order and over any number of inputs (what
+//! the `evaluator` node does, without IPC): ground-truth fields, estimated fields (by name, e.g.
+//! `raw`, `regularised`) and Doppler maps are matched by packet; each estimate is evaluated as
+//! soon as its packet's truth is there, its errors pooled per field, and the maps' looks pooled
+//! per look. [`OnlineEvaluation::finish`] gives the [`Evaluation`] and draws the figures.
+
+use crate::evaluation::*;
+use crate::metrics::FieldError;
+use sonoflow_messages::plane;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One estimate evaluated against its packet's truth.
+#[derive(Clone, Debug)]
+pub struct Evaluated {
+    /// The packet.
+    pub packet: u32,
+    /// The estimated field's name (`raw`, `regularised`, …).
+    pub name: String,
+    /// Its errors.
+    pub error: FieldError,
+    /// Frame id and time of validity of the packet's truth.
+    pub frame_id: u64,
+    pub t_valid: f64,
+}
+
+/// The evaluation so far: see the module doc.
+pub struct OnlineEvaluation {
+    params: EvaluatorParams,
+    truths: BTreeMap<u32, Field>,
+    estimates: BTreeMap<(u32, String), Field>,
+    done: BTreeMap<u32, PacketEval>,
+    fig: FigureData,
+    /// Per field: pooled errors, pixels, pixels without estimate, largest v_max.
+    pooled: BTreeMap<String, Pooled>,
+    /// Maps waiting for their packet's truth, and the per-look pools.
+    look_pending: BTreeMap<u32, Vec<Map>>,
+    look_pools: BTreeMap<(u64, u64, u64), LookPool>,
+}
+
+impl OnlineEvaluation {
+    pub fn new(params: EvaluatorParams) -> Self {
+        Self {
+            params,
+            truths: BTreeMap::new(),
+            estimates: BTreeMap::new(),
+            done: BTreeMap::new(),
+            fig: FigureData::default(),
+            pooled: BTreeMap::new(),
+            look_pending: BTreeMap::new(),
+            look_pools: BTreeMap::new(),
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &EvaluatorParams {
+        &self.params
+    }
+
+    /// A packet's ground truth (planes vx, vz, mask).
+    pub fn add_truth(&mut self, truth: Field) {
+        self.truths.insert(truth.0.packet, truth);
+    }
+
+    /// An estimated field named `name` (planes vx, vz, optional flags).
+    pub fn add_estimate(&mut self, name: &str, est: Field) {
+        self.estimates.insert((est.0.packet, name.to_string()), est);
+    }
+
+    /// A colour Doppler map: its look is evaluated if it carries the projection planes, and the
+    /// figures keep the most recent maps.
+    pub fn add_map(&mut self, m: Map) {
+        if map_plane(&m.0, &m.1, plane::PROJECTION_X).is_some() {
+            self.look_pending.entry(m.0.packet).or_default().push(m.clone());
+        }
+        if self.params.figures {
+            self.fig.keep_map(m);
+        }
+    }
+
+    /// Evaluates every estimate and map whose packet's truth has arrived; returns the estimates
+    /// evaluated, in (packet, name) order.
+    pub fn evaluate_ready(&mut self) -> anyhow::Result<Vec<Evaluated>> {
+        let mut evaluated = Vec::new();
+        let ready: Vec<(u32, String)> =
+            self.estimates.keys().filter(|(pk, _)| self.truths.contains_key(pk)).cloned().collect();
+        for key in ready {
+            let (Some(est), Some(truth)) = (self.estimates.remove(&key), self.truths.get(&key.0)) else { continue };
+            let (fe, smp) = evaluate_pair_samples(truth, &est, self.params.margin)?;
+            let entry = self.done.entry(key.0).or_insert_with(|| PacketEval {
+                packet: key.0,
+                t_valid: truth.0.common.t_valid,
+                fields: BTreeMap::new(),
+            });
+            pool(self.pooled.entry(key.1.clone()).or_default(), &fe, &smp);
+            entry.fields.insert(key.1.clone(), fe.clone());
+            if self.params.figures {
+                let pooled = self.fig.samples.entry(key.1.clone()).or_default();
+                pooled.0.extend(smp.ex);
+                pooled.1.extend(smp.ez);
+                self.fig.keep_estimate(key.0, truth, &key.1, est);
+            }
+            let (frame_id, t_valid) = (truth.0.common.frame_id, truth.0.common.t_valid);
+            evaluated.push(Evaluated { packet: key.0, name: key.1, error: fe, frame_id, t_valid });
+        }
+        let ready: Vec<u32> = self.look_pending.keys().filter(|pk| self.truths.contains_key(pk)).copied().collect();
+        for pk in ready {
+            let (Some(maps), Some(truth)) = (self.look_pending.remove(&pk), self.truths.get(&pk)) else { continue };
+            for m in &maps {
+                pool_look(&mut self.look_pools, truth, m, self.params.margin)?;
+            }
+        }
+        Ok(evaluated)
+    }
+
+    /// What never met its truth: one line per packet and field (or Doppler maps).
+    pub fn unmatched(&self) -> Vec<String> {
+        let est =
+            self.estimates.keys().map(|(pk, name)| format!("no ground truth for packet {pk} ({name}): not evaluated"));
+        let maps = self
+            .look_pending
+            .keys()
+            .map(|pk| format!("no ground truth for packet {pk} (Doppler maps): per-look errors left out"));
+        est.chain(maps).collect()
+    }
+
+    /// The evaluation: packets, pooled errors per field and per look; with `figures_dir` (and
+    /// `figures = true`) the figures drawn into `figures_dir/figures/` (a figure that cannot be
+    /// drawn is a warning in the evaluation).
+    pub fn finish(self, figures_dir: Option<&Path>) -> Evaluation {
+        let mut eval =
+            Evaluation { label: self.params.label.clone(), margin: self.params.margin, ..Default::default() };
+        eval.packets = self.done.into_values().collect();
+        eval.overall = overall(self.pooled);
+        eval.looks = looks(self.look_pools);
+        if let (Some(dir), true) = (figures_dir, self.params.figures) {
+            (eval.figures, eval.warnings) = write_figures(dir, &self.fig, eval.packets.len(), &self.params.label);
+        }
+        eval
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use sonoflow_messages::{GridV1, VectorFieldHeaderV1};
+
+    fn field(packet: u32, planes: &[(u32, Vec<f32>)]) -> Field {
+        let grid = GridV1 { x0: 0.0, z0: 0.0, dx: 1e-4, dz: 1e-4, nx: 12, nz: 10 };
+        let mut h = VectorFieldHeaderV1 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
+        for (k, (id, _)) in planes.iter().enumerate() {
+            h.plane_ids[k] = *id;
+        }
+        h.common.frame_id = 100 + u64::from(packet);
+        (h, planes.iter().flat_map(|(_, d)| d.iter().copied()).collect())
+    }
+
+    /// Estimates wait for their truth, whatever the order of arrival; each is evaluated once, as
+    /// `evaluate_pair` would; the pooled figure covers both packets; what never met a truth is
+    /// named.
+    #[test]
+    fn estimates_meet_their_truth_in_any_order() {
+        let n = 120;
+        let mask: Vec<f32> = (0..n).map(|i| if (i / 12) % 9 != 0 { 1.0 } else { 0.0 }).collect();
+        let vx: Vec<f32> = mask.iter().map(|m| 0.3 * m).collect();
+        let noisy = |k: usize| -> Vec<f32> {
+            vx.iter().enumerate().map(|(i, v)| v + 0.01 * ((i * k % 5) as f32 - 2.0)).collect()
+        };
+        let zero = vec![0.0f32; n];
+        let truth = |pk| field(pk, &[(plane::VX, vx.clone()), (plane::VZ, zero.clone()), (plane::MASK, mask.clone())]);
+        let est = |pk, k| field(pk, &[(plane::VX, noisy(k)), (plane::VZ, zero.clone())]);
+
+        let p = EvaluatorParams { margin: 0, figures: false, ..Default::default() };
+        let mut ev = OnlineEvaluation::new(p);
+        ev.add_estimate("raw", est(1, 3));
+        ev.add_estimate("raw", est(7, 2));
+        assert!(ev.evaluate_ready().unwrap().is_empty(), "no truth yet");
+        ev.add_truth(truth(1));
+        let done = ev.evaluate_ready().unwrap();
+        assert_eq!(done.len(), 1);
+        assert_eq!((done[0].packet, done[0].name.as_str(), done[0].frame_id), (1, "raw", 101));
+        assert_eq!(done[0].error, evaluate_pair(&truth(1), &est(1, 3), 0).unwrap());
+        assert!(ev.evaluate_ready().unwrap().is_empty(), "evaluated once");
+        ev.add_truth(truth(2));
+        ev.add_estimate("raw", est(2, 4));
+        assert_eq!(ev.evaluate_ready().unwrap().len(), 1);
+        assert_eq!(ev.unmatched(), vec!["no ground truth for packet 7 (raw): not evaluated".to_string()]);
+        let e = ev.finish(None);
+        assert_eq!(e.packets.iter().map(|p| p.packet).collect::<Vec<_>>(), vec![1, 2]);
+        let pooled = &e.overall["raw"];
+        assert_eq!(pooled.pixels, e.packets.iter().map(|p| p.fields["raw"].pixels).sum::<usize>());
+        assert!(e.figures.is_empty() && e.looks.is_empty());
+    }
+}
