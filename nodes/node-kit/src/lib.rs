@@ -29,6 +29,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
 pub use receive::{for_each, select_loop, transform, Flow, SelectEnd, Step, Wakeup};
 use sonoflow_messages::types::{StageStats, WireMessage};
 use sonoflow_messages::{MessageType, MsgHeaderV1, StageStatsHeaderV1, FLAG_END_OF_STREAM};
@@ -267,7 +268,7 @@ impl<M: WireMessage> Output<M> {
     ///
     /// `fill` must initialise all `n` elements (they are `Pod`, so a missed element is garbage,
     /// never undefined behaviour on the type level; tests verify payloads end to end).
-    pub fn publish_in_place<F>(&mut self, n: usize, mut header: M::Header, fill: F) -> Result<(), KitError>
+    pub fn publish_in_place<F>(&mut self, n: usize, header: M::Header, fill: F) -> Result<(), KitError>
     where
         F: FnOnce(&mut [MaybeUninit<M::Elem>]),
     {
@@ -278,7 +279,19 @@ impl<M: WireMessage> Output<M> {
         let mut sample = self.publisher.loan_slice_uninit(n).map_err(ipc(ctx.clone()))?;
         fill(sample.payload_mut());
         // SAFETY: the contract of `fill` is to write every element; elements are `Pod`.
-        let mut sample = unsafe { sample.assume_init() };
+        let sample = unsafe { sample.assume_init() };
+        self.send(sample, header, n, ctx)
+    }
+
+    /// Stamps the header (sequence number, publish time, source), sends the sample of `n`
+    /// elements and wakes the subscribers.
+    fn send(
+        &mut self,
+        mut sample: SampleMut<Svc, [M::Elem], M::Header>,
+        mut header: M::Header,
+        n: usize,
+        ctx: String,
+    ) -> Result<(), KitError> {
         {
             let c = M::common_mut(&mut header);
             c.seq = self.seq;
@@ -319,20 +332,8 @@ impl<M: WireMessage> Output<M> {
             }
         }
         // SAFETY: initialised above.
-        let mut sample = unsafe { sample.assume_init() };
-        {
-            let c = M::common_mut(&mut header);
-            c.seq = self.seq;
-            c.t_pub_ns = unix_ns();
-            c.source_id = self.source_id;
-        }
-        *sample.user_header_mut() = header;
-        sample.send().map_err(ipc(ctx.clone()))?;
-        self.notifier.notify().map_err(ipc(ctx))?;
-        self.seq += 1;
-        self.sent += 1;
-        self.bytes += (n * std::mem::size_of::<M::Elem>()) as u64;
-        Ok(Ok(()))
+        let sample = unsafe { sample.assume_init() };
+        self.send(sample, header, n, ctx).map(Ok)
     }
 
     /// Publishes a copy of `payload` (one memcpy into shared memory).
