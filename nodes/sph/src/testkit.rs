@@ -44,7 +44,7 @@ pub fn open_channel(
     Ok((cfg, s))
 }
 
-/// max over rows k of |prof[k] − exact(z)| / scale, z = (k + 1) dx; NaN if any row is NaN.
+/// max over rows k of |prof\[k\] − exact(z)| / scale, z = (k + 1) dx; NaN if any row is NaN.
 pub fn profile_error(prof: &[Real], dx: Real, scale: Real, exact: impl Fn(Real) -> Real) -> Real {
     prof.iter().enumerate().map(|(k, u)| (u - exact((k + 1) as Real * dx)).abs() / scale).fold(0.0, |a, b| {
         if a.is_nan() || b.is_nan() {
