@@ -94,8 +94,9 @@ pub fn lfilter_zi(b: &[f64], a: &[f64]) -> Vec<f64> {
 }
 
 /// In-place transposed direct form II filtering of complex data with real coefficients
-/// (`scipy.signal.lfilter(b, a, x, zi = zi·x0)`), `a[0] = 1`. `z` is the state (len = order).
-fn lfilter_in_place<I: Iterator<Item = usize>>(
+/// (`scipy.signal.lfilter(b, a, x, zi = zi·x0)`), `a[0] = 1`, in the sample order `order` gives
+/// (e.g. `0..x.len()`). `z` is the state (len = order).
+pub fn lfilter_in_place<I: Iterator<Item = usize>>(
     b: &[f64],
     a: &[f64],
     x: &mut [Complex<f64>],

@@ -1,5 +1,9 @@
-//! Clutter (wall) filter: polynomial regression high-pass over slow time (Hoeks et al. 1991;
-//! Kadi & Loupas 1995; MUST `wfilt(…, 'poly', n)`, which PyMUST 0.1.9 ships broken).
+//! Clutter (wall) filters over slow time, chosen by [`ClutterParams`] (the Doppler stage's
+//! `clutter` table): polynomial regression ([`ClutterFilter`], below), a Butterworth IIR
+//! high-pass ([`crate::iir`]) or the SVD of the Casorati matrix ([`crate::svd`]).
+//!
+//! Polynomial regression high-pass (Hoeks et al. 1991; Kadi & Loupas 1995; MUST
+//! `wfilt(…, 'poly', n)`, which PyMUST 0.1.9 ships broken).
 //!
 //! Each pixel's slow-time signal is projected on the polynomials of degree ≤ `order` over the
 //! packet (an orthonormal basis built by modified Gram–Schmidt, twice, in f64) and the
@@ -7,7 +11,12 @@
 //! A signal that is a polynomial of degree ≤ order is removed exactly (to rounding).
 
 use num_complex::Complex;
+use serde::{Deserialize, Serialize};
 
+use crate::iir::{IirHighPass, IirInit};
+use crate::svd::{SvdFilter, SvdRank};
+
+use crate::slowtime::for_each_pixel;
 use sonoflow_beamform::error::{check_len, invalid, Result};
 use sonoflow_beamform::C32;
 
@@ -75,21 +84,7 @@ impl ClutterFilter {
     /// Filters a packet given as one mutable slice per frame (all of the same length).
     pub fn apply_frames(&self, frames: &mut [&mut [C32]]) -> Result<()> {
         check_len("clutter frames", frames.len(), self.n_frames)?;
-        let n_pix = frames.first().map_or(0, |f| f.len());
-        for f in frames.iter() {
-            check_len("clutter frame", f.len(), n_pix)?;
-        }
-        let mut x = vec![Complex::new(0.0f64, 0.0); self.n_frames];
-        for p in 0..n_pix {
-            for (xi, f) in x.iter_mut().zip(frames.iter()) {
-                *xi = Complex::new(f64::from(f[p].re), f64::from(f[p].im));
-            }
-            self.filter_pixel(&mut x);
-            for (xi, f) in x.iter().zip(frames.iter_mut()) {
-                f[p] = C32::new(xi.re as f32, xi.im as f32);
-            }
-        }
-        Ok(())
+        for_each_pixel(frames, |x| self.filter_pixel(x))
     }
 
     /// Filters a MUST-layout packet `data[pixel·n_frames + n]`.
@@ -108,5 +103,110 @@ impl ClutterFilter {
             }
         }
         Ok(())
+    }
+}
+
+/// Which clutter filter, and its parameters (`clutter = { type = "…", … }`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ClutterParams {
+    /// Polynomial regression: removes polynomials of degree ≤ `order` (0 ..= 8) over the packet.
+    Polynomial {
+        /// Degree removed (0 = the mean).
+        order: usize,
+    },
+    /// Butterworth high-pass of order `order` (1 ..= 8) with cut-off `cutoff` (fraction of the
+    /// PRF, 0 < f_c < 0.5) and initialisation `init` (`step`, the default, or `zero`).
+    Iir {
+        /// Filter order.
+        order: usize,
+        /// Cut-off, fraction of the PRF.
+        cutoff: f64,
+        /// Initial state.
+        #[serde(default)]
+        init: IirInit,
+    },
+    /// SVD of the Casorati matrix: `rank = r` removes r components; without `rank`, adaptive
+    /// with `tissue_cutoff` (fraction of the PRF, default 0.05) and `max_rank`.
+    Svd {
+        /// Fixed rank (absent: adaptive).
+        rank: Option<usize>,
+        /// Adaptive rank: largest |frequency| of a tissue component, fraction of the PRF.
+        #[serde(default = "default_tissue_cutoff")]
+        tissue_cutoff: f64,
+        /// Adaptive rank: upper bound (absent: ⌈frames/2⌉).
+        max_rank: Option<usize>,
+    },
+}
+
+fn default_tissue_cutoff() -> f64 {
+    0.05
+}
+
+/// Ids of the clutter filters in wire headers and reports.
+pub mod kind {
+    /// No clutter filter.
+    pub const NONE: u32 = 0;
+    /// Polynomial regression.
+    pub const POLYNOMIAL: u32 = 1;
+    /// Butterworth IIR high-pass.
+    pub const IIR: u32 = 2;
+    /// SVD (Casorati matrix).
+    pub const SVD: u32 = 3;
+}
+
+/// What the clutter filter did to one packet.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClutterReport {
+    /// [`kind`] of the filter.
+    pub kind: u32,
+    /// Polynomial degree or IIR order; the SVD rank removed.
+    pub order_or_rank: usize,
+    /// IIR cut-off or the SVD tissue cut-off (fraction of the PRF); 0 otherwise.
+    pub cutoff: f64,
+    /// SVD: fraction of the packet's energy removed; 0 otherwise.
+    pub removed_energy: f64,
+}
+
+impl ClutterParams {
+    /// Checks every field (errors name it); the packet size is checked when filtering.
+    pub fn validate(&self) -> Result<()> {
+        match *self {
+            ClutterParams::Polynomial { order } if order > 8 => {
+                Err(invalid("clutter.order", order, "in 0 ..= 8 (and below the packet size − 1)"))
+            }
+            ClutterParams::Polynomial { .. } => Ok(()),
+            ClutterParams::Iir { order, cutoff, init } => IirHighPass::new(order, cutoff, init).map(|_| ()),
+            ClutterParams::Svd { .. } => self.svd().map(|_| ()),
+        }
+    }
+
+    fn svd(&self) -> Result<SvdFilter> {
+        let ClutterParams::Svd { rank, tissue_cutoff, max_rank } = *self else {
+            return Err(invalid("clutter.type", "not svd", "svd"));
+        };
+        SvdFilter::new(match rank {
+            Some(r) => SvdRank::Fixed(r),
+            None => SvdRank::Adaptive { tissue_cutoff, max_rank },
+        })
+    }
+
+    /// Filters a packet given as one mutable slice per frame.
+    pub fn apply_frames(&self, frames: &mut [&mut [C32]]) -> Result<ClutterReport> {
+        match *self {
+            ClutterParams::Polynomial { order } => {
+                ClutterFilter::new(order, frames.len())?.apply_frames(frames)?;
+                Ok(ClutterReport { kind: kind::POLYNOMIAL, order_or_rank: order, ..Default::default() })
+            }
+            ClutterParams::Iir { order, cutoff, init } => {
+                IirHighPass::new(order, cutoff, init)?.apply_frames(frames)?;
+                Ok(ClutterReport { kind: kind::IIR, order_or_rank: order, cutoff, removed_energy: 0.0 })
+            }
+            ClutterParams::Svd { tissue_cutoff, rank, .. } => {
+                let o = self.svd()?.apply_frames(frames)?;
+                let cutoff = if rank.is_some() { 0.0 } else { tissue_cutoff };
+                Ok(ClutterReport { kind: kind::SVD, order_or_rank: o.rank, cutoff, removed_energy: o.removed_energy })
+            }
+        }
     }
 }

@@ -1,7 +1,9 @@
 //! Slow-time processing of beamformed I/Q packets (Shahriari & Garcia 2018, PMB 63:205011,
 //! eq. 19–20; MUST/PyMUST 0.1.9 `iq2doppler`):
 //!
-//! 1. [`ClutterFilter`] ([`clutter`]): polynomial-regression high-pass over slow time.
+//! 1. [`ClutterParams`] ([`clutter`]): clutter (wall) filters over slow time — polynomial
+//!    regression ([`ClutterFilter`]), Butterworth high-pass ([`IirHighPass`], [`iir`]), SVD of the
+//!    Casorati matrix with fixed or adaptive rank ([`SvdFilter`], [`svd`]).
 //! 2. [`DopplerEstimator`] ([`estimator`]): lag-L autocorrelation (eq. 19) or Loupas 2-D
 //!    autocorrelator, spatial window, power, variance and per-pixel flags.
 //! 3. [`solve_vector`] ([`vector`]): least-squares (vx, vz) from two or more looks (eq. 20),
@@ -18,15 +20,20 @@
 pub mod aperture;
 pub mod clutter;
 pub mod estimator;
+pub mod iir;
 pub mod packet;
+pub mod slowtime;
+pub mod svd;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 pub mod vector;
 
 pub use aperture::{aperture_projection, Aperture};
-pub use clutter::ClutterFilter;
+pub use clutter::{ClutterFilter, ClutterParams, ClutterReport};
 pub use estimator::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
+pub use iir::{IirHighPass, IirInit};
 pub use packet::{mean_power, LookHeader, LookMap, PacketAssembler, PacketParams, PacketProducts, ProjectionMode};
 pub use sonoflow_beamform::error::{BeamformError, Result};
 pub use sonoflow_beamform::{Grid, C32};
+pub use svd::{SvdFilter, SvdOutcome, SvdRank};
 pub use vector::{nominal_projection, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput};

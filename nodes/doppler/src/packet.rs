@@ -15,7 +15,7 @@ use sonoflow_beamform::error::{invalid, Result};
 use sonoflow_beamform::{BeamformError, Grid, C32};
 
 use crate::aperture::{aperture_projection, Aperture};
-use crate::clutter::ClutterFilter;
+use crate::clutter::{ClutterParams, ClutterReport};
 use crate::estimator::{DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
 use crate::vector::{nominal_projection, solve_vector_weighted, Projection, VectorField, VectorInput};
 
@@ -46,8 +46,11 @@ pub struct PacketParams {
     /// Aliasing flag threshold as a fraction of the Nyquist velocity, in (0, 1].
     pub alias_fraction: f64,
     /// Polynomial-regression clutter filter order over slow time (0 = mean removal), 0 ..= 8;
-    /// absent: none.
+    /// absent: none. Shorthand for `clutter = { type = "polynomial", order = … }`.
     pub clutter_order: Option<usize>,
+    /// Clutter (wall) filter: `polynomial`, `iir` or `svd` with their parameters
+    /// ([`ClutterParams`]); absent: none (or `clutter_order`).
+    pub clutter: Option<ClutterParams>,
     /// `aperture` (per-pixel, from the images' receive aperture) or `nominal`.
     pub projection: ProjectionMode,
 }
@@ -61,6 +64,7 @@ impl Default for PacketParams {
             window_shape: WindowShape::Hamming,
             alias_fraction: 0.9,
             clutter_order: None,
+            clutter: None,
             projection: ProjectionMode::Aperture,
         }
     }
@@ -88,6 +92,12 @@ impl PacketParams {
             if o > 8 {
                 return Err(invalid("clutter_order", o, "in 0 ..= 8 (and below the packet size)"));
             }
+            if self.clutter.is_some() {
+                return Err(invalid("clutter_order", o, "absent when a `clutter` table is given (one clutter filter)"));
+            }
+        }
+        if let Some(c) = &self.clutter {
+            c.validate()?;
         }
         Ok(())
     }
@@ -139,6 +149,8 @@ pub struct LookMap {
     /// The projection vector per pixel that the velocity measures (`a · (vx, vz)`), through the
     /// look's aperture; None: the nominal plane-wave projection ([`LookMap::projection_planes`]).
     pub projection: Option<Vec<[f32; 2]>>,
+    /// What the clutter filter did to this look's packet.
+    pub clutter: ClutterReport,
 }
 
 impl LookMap {
@@ -279,9 +291,16 @@ impl PacketAssembler {
                         ),
                     });
                 }
-                let cf = ClutterFilter::new(order, frames.len())?;
+            }
+            let clutter = match (&self.params.clutter, self.params.clutter_order) {
+                (Some(c), _) => Some(c.clone()),
+                (None, Some(order)) => Some(ClutterParams::Polynomial { order }),
+                (None, None) => None,
+            };
+            let mut clutter_report = ClutterReport::default();
+            if let Some(c) = clutter {
                 let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-                cf.apply_frames(&mut refs)?;
+                clutter_report = c.apply_frames(&mut refs)?;
             }
             let mut est = DopplerEstimator::new(dp.clone(), nx, nz, h.grid.dz)?;
             if dp.estimator == Estimator::Loupas {
@@ -305,6 +324,7 @@ impl PacketAssembler {
                 variance: self.map.variance.iter().map(|v| (*v as f64 / norm) as f32).collect(),
                 flags: self.map.flags.clone(),
                 projection,
+                clutter: clutter_report,
                 header: h,
             });
         }
