@@ -71,3 +71,73 @@ pub fn degenerate_vector_solves() -> [(u8, f32, f32); 2] {
         (f.flags[0], f.vx[0], f.vz[0])
     })
 }
+
+/// Per-pixel slow-time signals (f64).
+pub type SlowTime = Vec<Vec<num_complex::Complex<f64>>>;
+
+/// A synthetic clutter scene of `n_pix` pixels × `n_frames` frames: tissue `tissue_db` above
+/// the blood in power, one component per entry of `tissue_freqs` (a complex Gaussian amplitude
+/// per pixel times e^{i2π f t}, f in cycles per frame), and blood with a complex Gaussian
+/// amplitude per pixel at a frequency spread linearly over `blood_band` across the pixels.
+/// Returns (tissue + blood, blood alone). Deterministic in `seed` (splitmix64, Box–Muller).
+pub fn tissue_and_blood(
+    n_pix: usize,
+    n_frames: usize,
+    tissue_db: f64,
+    tissue_freqs: &[f64],
+    blood_band: (f64, f64),
+    seed: u64,
+) -> (SlowTime, SlowTime) {
+    use num_complex::Complex;
+    let mut state = seed;
+    let mut uniform = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut gauss = move || {
+        let (u, v) = (uniform().max(1e-300), uniform());
+        Complex::from_polar((-u.ln()).sqrt(), 2.0 * PI * v)
+    };
+    let amp = 10f64.powf(tissue_db / 20.0);
+    let tone = |f: f64, t: usize| Complex::from_polar(1.0, 2.0 * PI * f * t as f64);
+    let mut mixed = Vec::with_capacity(n_pix);
+    let mut blood = Vec::with_capacity(n_pix);
+    for p in 0..n_pix {
+        let tissue: Vec<Complex<f64>> = tissue_freqs.iter().map(|_| gauss() * amp).collect();
+        let (a, f) = (gauss(), blood_band.0 + (blood_band.1 - blood_band.0) * p as f64 / n_pix as f64);
+        let b: Vec<Complex<f64>> = (0..n_frames).map(|t| a * tone(f, t)).collect();
+        mixed.push(
+            (0..n_frames)
+                .map(|t| b[t] + tissue.iter().zip(tissue_freqs).map(|(c, &fk)| c * tone(fk, t)).sum::<Complex<f64>>())
+                .collect(),
+        );
+        blood.push(b);
+    }
+    (mixed, blood)
+}
+
+/// The packet as frames (f32) from per-pixel slow-time signals.
+pub fn frames_of(pixels: &[Vec<num_complex::Complex<f64>>]) -> Vec<Vec<C32>> {
+    let n = pixels.first().map_or(0, |p| p.len());
+    (0..n).map(|t| pixels.iter().map(|p| C32::new(p[t].re as f32, p[t].im as f32)).collect()).collect()
+}
+
+/// Per-pixel slow-time signals (f64) from frames.
+pub fn pixels_of(frames: &[Vec<C32>]) -> SlowTime {
+    let n_pix = frames.first().map_or(0, |f| f.len());
+    (0..n_pix)
+        .map(|p| frames.iter().map(|f| num_complex::Complex::new(f64::from(f[p].re), f64::from(f[p].im))).collect())
+        .collect()
+}
+
+/// Mean lag-1 Doppler frequency (cycles per frame, from the autocorrelation summed over the
+/// pixels) and mean power of per-pixel slow-time signals.
+pub fn frequency_and_power(pixels: &[Vec<num_complex::Complex<f64>>]) -> (f64, f64) {
+    let r1: num_complex::Complex<f64> = pixels.iter().flat_map(|p| p.windows(2).map(|w| w[1] * w[0].conj())).sum();
+    let n: usize = pixels.iter().map(|p| p.len()).sum();
+    let p = pixels.iter().flatten().map(|v| v.norm_sqr()).sum::<f64>() / n.max(1) as f64;
+    (r1.arg() / (2.0 * PI), p)
+}

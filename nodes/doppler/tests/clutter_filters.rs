@@ -6,20 +6,12 @@
 #![allow(clippy::unwrap_used)]
 
 use num_complex::Complex;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
+use sonoflow_doppler::testkit::{frames_of, frequency_and_power, pixels_of, tissue_and_blood};
 use sonoflow_doppler::{ClutterParams, IirHighPass, IirInit, PacketParams, SvdFilter, SvdRank, C32};
 use std::f64::consts::{PI, TAU};
 
 fn tone(f: f64, n: usize) -> Vec<Complex<f64>> {
     (0..n).map(|k| Complex::from_polar(1.0, TAU * f * k as f64)).collect()
-}
-
-/// A packet as frames from per-pixel slow-time signals.
-fn frames_of(pixels: &[Vec<Complex<f64>>]) -> Vec<Vec<C32>> {
-    let n = pixels[0].len();
-    (0..n).map(|t| pixels.iter().map(|p| C32::new(p[t].re as f32, p[t].im as f32)).collect()).collect()
 }
 
 fn filter(c: &ClutterParams, frames: &mut [Vec<C32>]) -> sonoflow_doppler::ClutterReport {
@@ -89,20 +81,6 @@ fn polynomial_regression_removes_the_closed_form_energy() {
     }
 }
 
-/// Mean lag-1 Doppler frequency (cycles/frame) and mean power of a packet.
-fn frequency_and_power(pixels: &[Vec<Complex<f64>>]) -> (f64, f64) {
-    let r1: Complex<f64> = pixels.iter().flat_map(|p| p.windows(2).map(|w| w[1] * w[0].conj())).sum();
-    let p = pixels.iter().flat_map(|p| p.iter()).map(|v| v.norm_sqr()).sum::<f64>()
-        / (pixels.len() * pixels[0].len()) as f64;
-    (r1.arg() / TAU, p)
-}
-
-fn pixels_of(frames: &[Vec<C32>]) -> Vec<Vec<Complex<f64>>> {
-    (0..frames[0].len())
-        .map(|p| frames.iter().map(|f| Complex::new(f64::from(f[p].re), f64::from(f[p].im))).collect())
-        .collect()
-}
-
 /// Tissue 60 dB above the blood (a still and a slowly moving component, 0 and 0.01 PRF) and blood
 /// at 0.15 … 0.25 PRF: the adaptive SVD filter removes the two tissue components and leaves the
 /// blood's mean Doppler frequency within 1 % and its power within 1 dB of the blood alone.
@@ -110,23 +88,7 @@ fn pixels_of(frames: &[Vec<C32>]) -> Vec<Vec<Complex<f64>>> {
 fn svd_filter_removes_tissue_60_db_above_blood() {
     let (n_pix, n) = (3000, 32);
     for seed in [1u64, 2, 3] {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut gauss = || Complex::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal));
-        let tissue_amp = 1000.0; // 60 dB in power
-        let (still, slow): (Vec<_>, Vec<_>) = (0..n_pix).map(|_| (gauss() * tissue_amp, gauss() * tissue_amp)).unzip();
-        let blood: Vec<Vec<Complex<f64>>> = (0..n_pix)
-            .map(|p| {
-                let (a, f) = (gauss(), 0.15 + 0.1 * p as f64 / n_pix as f64);
-                (0..n).map(|t| a * Complex::from_polar(1.0, TAU * f * t as f64)).collect()
-            })
-            .collect();
-        let mixed: Vec<Vec<Complex<f64>>> = (0..n_pix)
-            .map(|p| {
-                (0..n)
-                    .map(|t| blood[p][t] + still[p] + slow[p] * Complex::from_polar(1.0, TAU * 0.01 * t as f64))
-                    .collect()
-            })
-            .collect();
+        let (mixed, blood) = tissue_and_blood(n_pix, n, 60.0, &[0.0, 0.01], (0.15, 0.25), seed);
         let (f_blood, p_blood) = frequency_and_power(&blood);
         let mut frames = frames_of(&mixed);
         let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
