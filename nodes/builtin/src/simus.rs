@@ -10,7 +10,7 @@ use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{ParticleSnapshotHeaderV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
-use sonoflow_simus::{FramePlanner, FrequencyPlan, Scan, ScanParams, Simus, SimusError};
+use sonoflow_simus::{FramePlanner, FrequencyPlan, NoiseModel, Scan, ScanParams, Simus};
 
 /// The `simus` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -35,6 +35,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_el = scan.probe.n_elements;
     let (mut xs, mut zs, mut rcs) = (Vec::new(), Vec::new(), Vec::new());
+    let mut noise: Option<NoiseModel> = None;
     transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
@@ -60,10 +61,19 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let t1 = process_cpu_ns();
             let rh = rf_header(&p, &scan, &pl, &h, tx_id);
             let n = n_el * pl.n_samples;
+            if let (Some(np), None) = (&p.noise, &noise) {
+                noise = Some(
+                    NoiseModel::new(np.clone(), scan.probe.fc, scan.probe.bandwidth, pl.fs)
+                        .map_err(anyhow::Error::msg)?,
+                );
+            }
             let r = out.publish_init(n, rh, |buf, hdr| {
                 simus.simulate_into(scat, tx, &pl, buf)?;
+                if let Some(m) = noise.as_mut() {
+                    m.add(buf, hdr.common.frame_id).map_err(anyhow::Error::msg)?;
+                }
                 hdr.common.compute_ns = process_cpu_ns() - t1 + if tx_id == 0 { plan_ns } else { 0 };
-                Ok::<(), SimusError>(())
+                Ok::<(), anyhow::Error>(())
             })?;
             r?;
             let compute = process_cpu_ns() - t1 + if tx_id == 0 { plan_ns } else { 0 };

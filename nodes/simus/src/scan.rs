@@ -4,7 +4,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{FrequencyPlan, Medium, Probe, Result, ScattererSlices, Simus, SimusError, SimusOptions, Transmit};
+use crate::{
+    FrequencyPlan, Medium, NoiseParams, Probe, Result, ScattererSlices, Simus, SimusError, SimusOptions, Transmit,
+};
 
 /// A probe given by MUST preset name or in full.
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -59,6 +61,8 @@ pub struct ScanParams {
     /// [0, 1] (0 = rectangular, MUST's default; 1 = Hann). A taper weakens the edge waves of the
     /// plane wave.
     pub tx_tukey: f64,
+    /// Receive noise (`noise = { snr_db = …, seed = … }`, [`crate::noise`]); absent: none.
+    pub noise: Option<NoiseParams>,
 }
 
 impl Default for ScanParams {
@@ -72,6 +76,7 @@ impl Default for ScanParams {
             plan: PacketPlan::PerPacket,
             plan_margin: 2e-3,
             tx_tukey: 0.0,
+            noise: None,
         }
     }
 }
@@ -117,6 +122,9 @@ impl ScanParams {
         }
         if !(self.prf.is_finite() && self.prf > 0.0 && self.prf <= 1e7) {
             return Err(format!("prf = {} is out of range: (0, 1e7] Hz", self.prf));
+        }
+        if let Some(n) = &self.noise {
+            n.validate()?;
         }
         if !(self.plan_margin.is_finite() && (0.0..=1.0).contains(&self.plan_margin)) {
             return Err(format!("plan_margin = {} is out of range: 0 ..= 1 m", self.plan_margin));
