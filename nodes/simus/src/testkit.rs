@@ -302,3 +302,53 @@ pub fn many_scatterers(n: usize) -> ManyScatterers {
     };
     ManyScatterers { finite: all_finite(&rf.data), peak: peak(&rf.data), n_freq: rf.plan.n_freq, memory_growth_mib }
 }
+
+/// Mean power per sample of `x` (channels of `n` samples each, sampled at `fs`) inside
+/// [lo, hi] Hz, from each channel's FFT by Parseval.
+pub fn band_power(x: &[f32], n: usize, fs: f64, lo: f64, hi: f64) -> f64 {
+    let mut planner = realfft::RealFftPlanner::<f64>::new();
+    let fft = planner.plan_fft_forward(n);
+    let mut total = 0.0;
+    for ch in x.chunks(n) {
+        let mut buf: Vec<f64> = ch.iter().map(|&v| f64::from(v)).collect();
+        let mut spec = fft.make_output_vec();
+        fft.process(&mut buf, &mut spec).unwrap();
+        for (k, s) in spec.iter().enumerate().skip(1) {
+            let f = k as f64 * fs / n as f64;
+            if f >= lo && f <= hi && 2 * k != n {
+                total += 2.0 * s.norm_sqr();
+            }
+        }
+    }
+    total / (n as f64 * n as f64) / (x.len() / n) as f64
+}
+
+/// A clean SIMUS frame of 40 scatterers at 15–25 mm depth (paper probe, plane wave 0°), and
+/// the probe.
+pub fn forty_scatterer_frame() -> (RfFrame, Probe) {
+    let probe = Probe::paper_5mhz();
+    let n = 40;
+    let x: Vec<f32> = (0..n).map(|i| -8e-3 + 16e-3 * i as f32 / n as f32).collect();
+    let z: Vec<f32> = (0..n).map(|i| 15e-3 + 10e-3 * ((i * 7) % n) as f32 / n as f32).collect();
+    let rc: Vec<f32> = (0..n).map(|i| if i % 2 == 0 { 1.0 } else { -0.7 }).collect();
+    let mut simus = Simus::new(probe.clone(), Medium::default(), SimusOptions::default()).unwrap();
+    let tx = Transmit::plane_wave(&probe, 1540.0, 0.0).unwrap();
+    (simus.simulate(&Scatterers::new(x, z, rc).unwrap(), &tx).unwrap(), probe)
+}
+
+/// [`forty_scatterer_frame`] with receive noise at `snr_db`
+/// (seed `seed`, frame key 0), and the SNR measured as `crate::noise` defines it: the clean
+/// frame's mean power over the in-band power of the added noise. Returns (noisy data, measured
+/// SNR in dB).
+pub fn noisy_frame(snr_db: f64, seed: u64) -> (Vec<f32>, f64) {
+    let (rf, probe) = forty_scatterer_frame();
+    let params = crate::NoiseParams { snr_db, seed };
+    let mut model = crate::NoiseModel::new(params, probe.fc, probe.bandwidth, rf.fs).unwrap();
+    let mut noisy = rf.data.clone();
+    model.add(&mut noisy, 0).unwrap();
+    let noise: Vec<f32> = noisy.iter().zip(&rf.data).map(|(a, b)| a - b).collect();
+    let ps = rf.data.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / rf.data.len() as f64;
+    let (lo, hi) = (probe.fc * (1.0 - probe.bandwidth / 2.0), probe.fc * (1.0 + probe.bandwidth / 2.0));
+    let pn = band_power(&noise, rf.n_samples, rf.fs, lo, hi);
+    (noisy, 10.0 * (ps / pn).log10())
+}

@@ -4,38 +4,13 @@
 
 #![allow(clippy::unwrap_used)]
 
-use sonoflow_simus::{Medium, NoiseModel, NoiseParams, Probe, Scatterers, Simus, SimusOptions, Transmit};
+use sonoflow_simus::testkit::{band_power, forty_scatterer_frame, noisy_frame};
+use sonoflow_simus::{NoiseModel, NoiseParams, Probe};
 
-/// One RF frame of 40 scatterers (paper probe, plane wave at 0°): (data element-major, n_samples, fs).
+/// The testkit's 40-scatterer frame: (data element-major, n_samples, fs, probe).
 fn frame() -> (Vec<f32>, usize, f64, Probe) {
-    let probe = Probe::paper_5mhz();
-    let n = 40;
-    let x: Vec<f32> = (0..n).map(|i| -8e-3 + 16e-3 * i as f32 / n as f32).collect();
-    let z: Vec<f32> = (0..n).map(|i| 15e-3 + 10e-3 * ((i * 7) % n) as f32 / n as f32).collect();
-    let rc: Vec<f32> = (0..n).map(|i| if i % 2 == 0 { 1.0 } else { -0.7 }).collect();
-    let mut simus = Simus::new(probe.clone(), Medium::default(), SimusOptions::default()).unwrap();
-    let tx = Transmit::plane_wave(&probe, 1540.0, 0.0).unwrap();
-    let rf = simus.simulate(&Scatterers::new(x, z, rc).unwrap(), &tx).unwrap();
+    let (rf, probe) = forty_scatterer_frame();
     (rf.data, rf.n_samples, rf.fs, probe)
-}
-
-/// Mean power per sample of `x` (channels of `n` samples) inside [lo, hi] Hz, by Parseval.
-fn band_power(x: &[f32], n: usize, fs: f64, lo: f64, hi: f64) -> f64 {
-    let mut planner = realfft::RealFftPlanner::<f64>::new();
-    let fft = planner.plan_fft_forward(n);
-    let mut total = 0.0;
-    for ch in x.chunks(n) {
-        let mut buf: Vec<f64> = ch.iter().map(|&v| f64::from(v)).collect();
-        let mut spec = fft.make_output_vec();
-        fft.process(&mut buf, &mut spec).unwrap();
-        for (k, s) in spec.iter().enumerate().skip(1) {
-            let f = k as f64 * fs / n as f64;
-            if f >= lo && f <= hi && 2 * k != n {
-                total += 2.0 * s.norm_sqr();
-            }
-        }
-    }
-    total / (n as f64 * n as f64) / (x.len() / n) as f64
 }
 
 #[test]
@@ -77,4 +52,14 @@ fn noise_is_reproducible_per_frame_key_and_checked() {
     assert!(e.contains("noise.snr_db") && e.contains("-40 ..= 120"), "{e}");
     let e = NoiseModel::new(p, 5e6, 0.5, 4e6).unwrap_err();
     assert!(e.contains("probe band") && e.contains("empty"), "{e}");
+}
+
+/// The testkit's noisy frame (used by the stability matrix) measures what the test above does.
+#[test]
+fn testkit_noisy_frame_measures_the_set_snr() {
+    for snr_db in [0.0, -10.0] {
+        let (noisy, measured) = noisy_frame(snr_db, 1);
+        assert!(noisy.iter().all(|v| v.is_finite()));
+        assert!((measured - snr_db).abs() < 0.5, "{snr_db}: {measured}");
+    }
 }

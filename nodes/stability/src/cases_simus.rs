@@ -2,7 +2,7 @@
 
 use super::{Case, CaseResult, Check, Ctx, Expected, OrMessage, Stage};
 use sonoflow_simus::testkit::{
-    all_finite, grazing_angles, many_scatterers, one, pw0, random_scatterers, scatterer_on_array_face,
+    all_finite, grazing_angles, many_scatterers, noisy_frame, one, pw0, random_scatterers, scatterer_on_array_face,
     very_deep_scatterer, zero_scatterers,
 };
 use sonoflow_simus::{Medium, Probe, Simus, SimusError, SimusOptions, Transmit};
@@ -80,6 +80,19 @@ pub(super) fn cases() -> Vec<Case> {
             "a packet plan made for 1 cm used for a scatterer at 10 cm (would alias circularly)",
             Expected::ClearError(&["frequency plan too coarse"]),
             plan_too_short,
+        ),
+        Stage::Simus.case(
+            "snr-0-db",
+            "receive noise at SNR 0 dB on a 40-scatterer frame; check: finite RF, in-band SNR measured from the \
+             added noise within 0.5 dB of the set value",
+            Expected::Pass,
+            |_| snr_case(0.0),
+        ),
+        Stage::Simus.case(
+            "snr-minus-10-db",
+            "receive noise at SNR -10 dB (noise 10 dB above the echoes); same check",
+            Expected::Pass,
+            |_| snr_case(-10.0),
         ),
     ]
 }
@@ -195,4 +208,13 @@ fn plan_too_short(_: &Ctx) -> CaseResult {
     let plan = simus.plan_for_max_distance(0.01, 0.0).msg()?;
     let mut out = vec![0f32; p.n_elements * plan.n_samples];
     simus.simulate_into(&one(0.0, 0.1), &pw0(&p), &plan, &mut out).map(|_| Check::new(true, "no aliasing error")).msg()
+}
+
+fn snr_case(snr_db: f64) -> CaseResult {
+    let (noisy, measured) = noisy_frame(snr_db, 11);
+    let finite = noisy.iter().all(|v| v.is_finite());
+    Ok(Check::new(
+        finite && (measured - snr_db).abs() < 0.5,
+        format!("finite: {finite}; measured SNR {measured:.2} dB for {snr_db} dB"),
+    ))
 }
