@@ -390,6 +390,30 @@ fn vessel_error(truth: &[f32], est: &[f32], nx: usize, nz: usize, margin: usize)
 
 /// The quickstart chain (flow → SIMUS → beamformer ±15° → Doppler → regulariser) measures the
 /// vessel's velocity field; the estimator is swappable by `--set`.
+/// The Doppler stage's clutter filter travels in the map headers (DopplerMapV2) and reaches the
+/// evaluation: a fixed-rank SVD on the quickstart packet.
+#[test]
+fn clutter_filter_is_in_the_map_headers_and_the_evaluation() {
+    use sonoflow_messages::types::DopplerMap;
+    let dir = tempfile::tempdir().unwrap();
+    let clutter = "doppler.clutter={ type = \"svd\", rank = 1 }";
+    run_graph_ok("launch/quickstart.toml", dir.path(), &["--set", "flow.schedule.n_packets=1", "--set", clutter]);
+    let maps = read_topic(&dir.path().join("recording.mcap"), "maps");
+    assert_eq!(maps.len(), 2);
+    for m in &maps {
+        let (mh, _) = cdr::decode::<DopplerMap>(m).unwrap();
+        assert_eq!((mh.clutter_filter, mh.clutter_order), (sonoflow_messages::CLUTTER_SVD, 1));
+        assert!(mh.clutter_removed_energy > 0.0 && mh.clutter_removed_energy < 1.0, "{}", mh.clutter_removed_energy);
+    }
+    let eval: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("evaluation.json")).unwrap()).unwrap();
+    let c = &eval["clutter"][0];
+    assert_eq!(
+        (c["filter"].as_str(), c["order_min"].as_u64(), c["order_max"].as_u64(), c["maps"].as_u64()),
+        (Some("svd"), Some(1), Some(1), Some(2))
+    );
+}
+
 #[test]
 fn quickstart_chain_measures_the_vessel_velocity() {
     use sonoflow_messages::types::DopplerMap;

@@ -23,7 +23,7 @@ pub enum MessageType {
     ParticleSnapshotV1,
     RfFrameV2,
     IqFrameV2,
-    DopplerMapV1,
+    DopplerMapV2,
     VectorFieldV1,
     StageStatsV1,
     FlowStatsV1,
@@ -35,7 +35,7 @@ impl MessageType {
         MessageType::ParticleSnapshotV1,
         MessageType::RfFrameV2,
         MessageType::IqFrameV2,
-        MessageType::DopplerMapV1,
+        MessageType::DopplerMapV2,
         MessageType::VectorFieldV1,
         MessageType::StageStatsV1,
         MessageType::FlowStatsV1,
@@ -47,7 +47,7 @@ impl MessageType {
             MessageType::ParticleSnapshotV1 => "ParticleSnapshotV1",
             MessageType::RfFrameV2 => "RfFrameV2",
             MessageType::IqFrameV2 => "IqFrameV2",
-            MessageType::DopplerMapV1 => "DopplerMapV1",
+            MessageType::DopplerMapV2 => "DopplerMapV2",
             MessageType::VectorFieldV1 => "VectorFieldV1",
             MessageType::StageStatsV1 => "StageStatsV1",
             MessageType::FlowStatsV1 => "FlowStatsV1",
@@ -118,6 +118,11 @@ pub const RETIRED: &[(&str, &str, &str)] = &[
         "IqFrameV2",
         "the header gained the receive aperture: pitch, width, f-number, n_elements, apodisation",
     ),
+    (
+        "DopplerMapV1",
+        "DopplerMapV2",
+        "the header gained the clutter filter: kind, order or rank, cut-off, energy removed",
+    ),
 ];
 
 /// Ties a [`MessageType`] to its header and payload element types.
@@ -161,7 +166,7 @@ message_type!(RfFrame, RfFrameV2, RfFrameHeaderV2, f32, |h| {
     Some(h.n_channels as usize * h.n_samples as usize * per)
 });
 message_type!(IqFrame, IqFrameV2, IqFrameHeaderV2, Complex32, |h| Some(h.grid.nx as usize * h.grid.nz as usize));
-message_type!(DopplerMap, DopplerMapV1, DopplerMapHeaderV1, f32, |h| Some(
+message_type!(DopplerMap, DopplerMapV2, DopplerMapHeaderV2, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
 message_type!(VectorField, VectorFieldV1, VectorFieldHeaderV1, f32, |h| Some(
@@ -187,7 +192,7 @@ macro_rules! with_type {
                 type $M = $crate::types::IqFrame;
                 $body
             }
-            $crate::MessageType::DopplerMapV1 => {
+            $crate::MessageType::DopplerMapV2 => {
                 type $M = $crate::types::DopplerMap;
                 $body
             }
@@ -227,6 +232,6 @@ mod tests {
         let e = MessageType::parse("RfFrameV1").unwrap_err();
         assert!(e.contains("RfFrameV2") && e.contains("element width"), "{e}");
         let e = MessageType::parse("IqFrame").unwrap_err();
-        assert!(e.contains("unknown") && e.contains("DopplerMapV1"), "{e}");
+        assert!(e.contains("unknown") && e.contains("DopplerMapV2"), "{e}");
     }
 }

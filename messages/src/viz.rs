@@ -68,8 +68,8 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageType::DopplerMapV1 => {
-            let h: DopplerMapHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
+        MessageType::DopplerMapV2 => {
+            let h: DopplerMapHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
         MessageType::VectorFieldV1 => {

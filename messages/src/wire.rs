@@ -8,7 +8,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV2`].
 pub const MAX_TX_ELEMENTS: usize = 256;
-/// Maximum number of planes in a map ([`DopplerMapHeaderV1`], [`VectorFieldHeaderV1`]).
+/// Maximum number of planes in a map ([`DopplerMapHeaderV2`], [`VectorFieldHeaderV1`]).
 pub const MAX_PLANES: usize = 8;
 
 /// `flags` bit: last message of the stream; the payload may be empty.
@@ -188,7 +188,7 @@ pub const APODIZATION_BOXCAR: u32 = 0;
 /// `IqFrameHeaderV2::apodization`: Hann window across the aperture.
 pub const APODIZATION_HANN: u32 = 1;
 
-/// Plane ids of maps ([`DopplerMapHeaderV1::plane_ids`], [`VectorFieldHeaderV1::plane_ids`]).
+/// Plane ids of maps ([`DopplerMapHeaderV2::plane_ids`], [`VectorFieldHeaderV1::plane_ids`]).
 pub mod plane {
     /// Unused slot.
     pub const NONE: u32 = 0;
@@ -232,10 +232,19 @@ pub mod plane {
     }
 }
 
+/// `DopplerMapHeaderV2::clutter_filter`: no clutter filter.
+pub const CLUTTER_NONE: u32 = 0;
+/// `DopplerMapHeaderV2::clutter_filter`: polynomial regression.
+pub const CLUTTER_POLYNOMIAL: u32 = 1;
+/// `DopplerMapHeaderV2::clutter_filter`: Butterworth IIR high-pass.
+pub const CLUTTER_IIR: u32 = 2;
+/// `DopplerMapHeaderV2::clutter_filter`: SVD of the Casorati matrix.
+pub const CLUTTER_SVD: u32 = 3;
+
 wire_struct! {
     /// Header of a colour-Doppler map for one receive angle. Payload: f32 planes,
     /// `data[p·nx·nz + iz·nx + ix]`, plane meaning in `plane_ids`.
-    pub struct DopplerMapHeaderV1 as "sonoflow_msgs/DopplerMapHeaderV1" {
+    pub struct DopplerMapHeaderV2 as "sonoflow_msgs/DopplerMapHeaderV2" {
         pub common: MsgHeaderV1,
         pub grid: GridV1,
         pub fc: f64,
@@ -245,6 +254,14 @@ wire_struct! {
         pub tx_angle: f64,
         /// c·PRF/(4 fc): the aliasing limit (m/s).
         pub nyquist_velocity: f64,
+        /// Clutter filter cut-off, a fraction of the PRF (IIR; SVD with an adaptive rank), else 0.
+        pub clutter_cutoff: f64,
+        /// Fraction of the packet's energy the clutter filter removed (SVD), else 0.
+        pub clutter_removed_energy: f64,
+        /// Clutter filter: `CLUTTER_NONE`, `CLUTTER_POLYNOMIAL`, `CLUTTER_IIR` or `CLUTTER_SVD`.
+        pub clutter_filter: u32,
+        /// Polynomial degree or IIR order; the SVD rank removed from this packet.
+        pub clutter_order: u32,
         pub packet: u32,
         pub packet_size: u32,
         pub n_planes: u32,

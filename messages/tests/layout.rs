@@ -14,7 +14,7 @@ fn sizes_are_pinned() {
     assert_eq!(size_of::<RfFrameHeaderV2>(), 1176);
     assert_eq!(size_of::<Complex32>(), 8);
     assert_eq!(size_of::<IqFrameHeaderV2>(), 192);
-    assert_eq!(size_of::<DopplerMapHeaderV1>(), 200);
+    assert_eq!(size_of::<DopplerMapHeaderV2>(), 224);
     assert_eq!(size_of::<VectorFieldHeaderV1>(), 168);
     assert_eq!(size_of::<StageStatsHeaderV1>(), 128);
     assert_eq!(size_of::<FlowStatsHeaderV1>(), 160);
@@ -54,7 +54,7 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(IqFrameHeaderV2, rx_angle), 128);
     assert_eq!(offset_of!(IqFrameHeaderV2, pitch), 144);
     assert_eq!(offset_of!(IqFrameHeaderV2, n_elements), 180);
-    assert_eq!(offset_of!(DopplerMapHeaderV1, plane_ids), 168);
+    assert_eq!(offset_of!(DopplerMapHeaderV2, plane_ids), 192);
     assert_eq!(offset_of!(VectorFieldHeaderV1, plane_ids), 136);
     assert_eq!(offset_of!(StageStatsHeaderV1, messages_in), 72);
     assert_eq!(offset_of!(FlowStatsHeaderV1, dt), 64);

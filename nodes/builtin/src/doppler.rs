@@ -7,12 +7,13 @@
 //! aperture of each look comes in the I/Q header (`projection = "nominal"` ignores it).
 
 use sonoflow_beamform::{Apodization, Grid, C32};
+use sonoflow_doppler::clutter::kind as clutter_kind;
 use sonoflow_doppler::{Aperture, Estimator, LookHeader, PacketAssembler, PacketParams, PacketProducts};
 use sonoflow_messages::types::{DopplerMap as DopplerMapMsg, IqFrame, VectorField};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV1, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, APODIZATION_HANN,
-    VECTOR_RAW,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, APODIZATION_HANN,
+    CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD, VECTOR_RAW,
 };
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
@@ -24,7 +25,7 @@ pub const SPEC: KindSpec = KindSpec::new(
     &[
         port("iq", In, IqFrameV2, true),
         port("vector", Out, VectorFieldV1, true),
-        port("maps", Out, DopplerMapV1, false),
+        port("maps", Out, DopplerMapV2, false),
     ],
     validate,
     run,
@@ -62,7 +63,7 @@ pub fn look_header(h: &IqFrameHeaderV2) -> LookHeader {
 type Message<H> = (H, Vec<f32>);
 
 /// The messages of one packet: one Doppler map per look, then the vector field.
-pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV1>>, Message<VectorFieldHeaderV1>) {
+pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, Message<VectorFieldHeaderV1>) {
     let n = r.grid.nx * r.grid.nz;
     let grid = sonoflow_messages::GridV1 {
         x0: r.grid.x0,
@@ -85,7 +86,7 @@ pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV1>>, 
             planes.extend(l.flags.iter().map(|f| *f as f32));
             planes.extend(px);
             planes.extend(pz);
-            let mut mh = DopplerMapHeaderV1 {
+            let mut mh = DopplerMapHeaderV2 {
                 grid,
                 fc: h.fc,
                 c: h.c,
@@ -100,6 +101,15 @@ pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV1>>, 
                     Estimator::Autocorrelation => 0,
                     Estimator::Loupas => 1,
                 },
+                clutter_filter: match l.clutter.kind {
+                    clutter_kind::POLYNOMIAL => CLUTTER_POLYNOMIAL,
+                    clutter_kind::IIR => CLUTTER_IIR,
+                    clutter_kind::SVD => CLUTTER_SVD,
+                    _ => CLUTTER_NONE,
+                },
+                clutter_order: l.clutter.order_or_rank as u32,
+                clutter_cutoff: l.clutter.cutoff,
+                clutter_removed_energy: l.clutter.removed_energy,
                 ..Default::default()
             };
             mh.plane_ids[..6].copy_from_slice(&[

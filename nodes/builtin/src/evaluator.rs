@@ -30,7 +30,7 @@ pub const SPEC: KindSpec = KindSpec::new(
             port("truth", In, VectorFieldV1, true),
             port("raw", In, VectorFieldV1, false),
             port("regularised", In, VectorFieldV1, false),
-            port("maps", In, DopplerMapV1, false),
+            port("maps", In, DopplerMapV2, false),
         ],
     validate,
     run,

@@ -8,7 +8,9 @@
 use crate::figures::{self, Figure};
 use crate::metrics::{field_error_samples, look_error, look_error_samples, FieldError, LookError, PixelGrid, Samples};
 use serde::{Deserialize, Serialize};
-use sonoflow_messages::{plane, DopplerMapHeaderV1, GridV1, VectorFieldHeaderV1};
+use sonoflow_messages::{
+    plane, DopplerMapHeaderV2, GridV1, VectorFieldHeaderV1, CLUTTER_IIR, CLUTTER_POLYNOMIAL, CLUTTER_SVD,
+};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -89,12 +91,83 @@ pub struct Evaluation {
     /// Figures that could not be drawn, and why.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// The clutter filters the Doppler maps report (from their headers; empty without maps or
+    /// without a clutter filter).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clutter: Vec<ClutterUse>,
+}
+
+/// One clutter filter as the Doppler maps of a run report it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ClutterUse {
+    /// `polynomial`, `iir` or `svd`.
+    pub filter: String,
+    /// IIR cut-off or the adaptive SVD's tissue cut-off (fraction of the PRF); 0 otherwise.
+    pub cutoff: f64,
+    /// Smallest and largest polynomial degree, IIR order or SVD rank over the maps.
+    pub order_min: u32,
+    pub order_max: u32,
+    /// Mean fraction of the packet energy removed (SVD; 0 otherwise).
+    pub removed_energy_mean: f64,
+    /// Maps (looks × packets) counted.
+    pub maps: usize,
+}
+
+impl ClutterUse {
+    /// Adds one map's header to the tally in `uses` (nothing for maps without a clutter filter).
+    pub fn tally(uses: &mut Vec<ClutterUse>, h: &DopplerMapHeaderV2) {
+        let filter = match h.clutter_filter {
+            CLUTTER_POLYNOMIAL => "polynomial",
+            CLUTTER_IIR => "iir",
+            CLUTTER_SVD => "svd",
+            _ => return,
+        };
+        let i = match uses.iter().position(|u| u.filter == filter && u.cutoff == h.clutter_cutoff) {
+            Some(i) => i,
+            None => {
+                let u = ClutterUse {
+                    filter: filter.into(),
+                    cutoff: h.clutter_cutoff,
+                    order_min: u32::MAX,
+                    ..Default::default()
+                };
+                uses.push(u);
+                uses.len() - 1
+            }
+        };
+        let u = &mut uses[i];
+        u.order_min = u.order_min.min(h.clutter_order);
+        u.order_max = u.order_max.max(h.clutter_order);
+        u.removed_energy_mean += (h.clutter_removed_energy - u.removed_energy_mean) / (u.maps + 1) as f64;
+        u.maps += 1;
+    }
+
+    /// One line for the report.
+    pub fn describe(&self) -> String {
+        let what = match self.filter.as_str() {
+            "polynomial" => "degree",
+            "iir" => "order",
+            _ => "rank",
+        };
+        let range = if self.order_min == self.order_max {
+            format!("{what} {}", self.order_min)
+        } else {
+            format!("{what} {}–{}", self.order_min, self.order_max)
+        };
+        let cutoff = if self.cutoff > 0.0 { format!(", cut-off {:.3} PRF", self.cutoff) } else { String::new() };
+        let removed = if self.filter == "svd" {
+            format!(", {:.1} % of the energy removed on average", 100.0 * self.removed_energy_mean)
+        } else {
+            String::new()
+        };
+        format!("{} ({range}{cutoff}{removed}; {} maps)", self.filter, self.maps)
+    }
 }
 
 /// A vector field message: header and planes.
 pub type Field = (VectorFieldHeaderV1, Vec<f32>);
 /// A Doppler map message: header and planes.
-pub type Map = (DopplerMapHeaderV1, Vec<f32>);
+pub type Map = (DopplerMapHeaderV2, Vec<f32>);
 
 /// Plane `id` of a payload of `n_planes` planes on `grid`, as listed in `plane_ids`.
 pub fn find_plane<'a>(
@@ -114,7 +187,7 @@ pub fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option
     find_plane(&h.grid, h.n_planes, &h.plane_ids, data, id)
 }
 
-pub fn map_plane<'a>(h: &DopplerMapHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
+pub fn map_plane<'a>(h: &DopplerMapHeaderV2, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
     find_plane(&h.grid, h.n_planes, &h.plane_ids, data, id)
 }
 
@@ -434,6 +507,9 @@ pub fn markdown(e: &Evaluation) -> String {
             );
         }
     }
+    for c in &e.clutter {
+        let _ = writeln!(s, "\nClutter filter: {}.", c.describe());
+    }
     if !e.looks.is_empty() {
         let _ = writeln!(
             s,
@@ -523,7 +599,7 @@ mod tests {
             (3, vec!["raw".to_string(), "regularised".into()])
         );
         // A map without a velocity plane: the Doppler figure fails, the others are drawn.
-        let mut mh = DopplerMapHeaderV1 { grid, packet: 3, n_planes: 1, nyquist_velocity: 0.77, ..Default::default() };
+        let mut mh = DopplerMapHeaderV2 { grid, packet: 3, n_planes: 1, nyquist_velocity: 0.77, ..Default::default() };
         mh.plane_ids[0] = plane::POWER;
         fig.keep_map((mh, vec![1.0; n]));
         let (figs, warns) = write_figures(dir.path(), &fig, 3, "");
@@ -536,7 +612,7 @@ mod tests {
         assert!(!dir.path().join("figures/doppler_maps.png").exists());
         // Maps of more than 4 packets: the oldest are dropped.
         for p in 4..10 {
-            fig.keep_map((DopplerMapHeaderV1 { packet: p, ..Default::default() }, Vec::new()));
+            fig.keep_map((DopplerMapHeaderV2 { packet: p, ..Default::default() }, Vec::new()));
         }
         assert_eq!(fig.maps.keys().copied().collect::<Vec<_>>(), [6, 7, 8, 9]);
     }
@@ -604,7 +680,7 @@ mod tests {
             let pz: Vec<f32> = (0..n).map(|i| a[1] as f32 * (1.0 - 0.001 * (i / nx) as f32)).collect();
             let vel: Vec<f32> = (0..n).map(|i| scale * (px[i] * tvx[i] + pz[i] * tvz[i])).collect();
             let mut h =
-                DopplerMapHeaderV1 { grid, packet, rx_angle: rx_deg.to_radians(), fc: 5e6, ..Default::default() };
+                DopplerMapHeaderV2 { grid, packet, rx_angle: rx_deg.to_radians(), fc: 5e6, ..Default::default() };
             let mut planes: Vec<(u32, Vec<f32>)> = vec![(plane::VELOCITY, vel), (plane::POWER, vec![1.0; n])];
             if with_projection {
                 planes.extend([(plane::PROJECTION_X, px), (plane::PROJECTION_Z, pz)]);

@@ -36,6 +36,7 @@ pub struct OnlineEvaluation {
     /// Maps waiting for their packet's truth, and the per-look pools.
     look_pending: BTreeMap<u32, Vec<Map>>,
     look_pools: BTreeMap<(u64, u64, u64), LookPool>,
+    clutter: Vec<ClutterUse>,
 }
 
 impl OnlineEvaluation {
@@ -49,6 +50,7 @@ impl OnlineEvaluation {
             pooled: BTreeMap::new(),
             look_pending: BTreeMap::new(),
             look_pools: BTreeMap::new(),
+            clutter: Vec::new(),
         }
     }
 
@@ -70,6 +72,7 @@ impl OnlineEvaluation {
     /// A colour Doppler map: its look is evaluated if it carries the projection planes, and the
     /// figures keep the most recent maps.
     pub fn add_map(&mut self, m: Map) {
+        ClutterUse::tally(&mut self.clutter, &m.0);
         if map_plane(&m.0, &m.1, plane::PROJECTION_X).is_some() {
             self.look_pending.entry(m.0.packet).or_default().push(m.clone());
         }
@@ -133,6 +136,7 @@ impl OnlineEvaluation {
         eval.packets = self.done.into_values().collect();
         eval.overall = overall(self.pooled);
         eval.looks = looks(self.look_pools);
+        eval.clutter = self.clutter;
         if let (Some(dir), true) = (figures_dir, self.params.figures) {
             (eval.figures, eval.warnings) = write_figures(dir, &self.fig, eval.packets.len(), &self.params.label);
         }
@@ -191,5 +195,36 @@ mod tests {
         let pooled = &e.overall["raw"];
         assert_eq!(pooled.pixels, e.packets.iter().map(|p| p.fields["raw"].pixels).sum::<usize>());
         assert!(e.figures.is_empty() && e.looks.is_empty());
+    }
+
+    /// The clutter filter of every map is tallied from its header into the evaluation and its
+    /// report line; maps without a filter add nothing.
+    #[test]
+    fn clutter_filters_of_the_maps_are_reported() {
+        use sonoflow_messages::{DopplerMapHeaderV2, CLUTTER_NONE, CLUTTER_SVD};
+        let mut ev = OnlineEvaluation::new(EvaluatorParams { figures: false, ..Default::default() });
+        let map = |filter, rank, removed| {
+            let h = DopplerMapHeaderV2 {
+                clutter_filter: filter,
+                clutter_order: rank,
+                clutter_cutoff: 0.05,
+                clutter_removed_energy: removed,
+                ..Default::default()
+            };
+            (h, Vec::new())
+        };
+        ev.add_map(map(CLUTTER_NONE, 0, 0.0));
+        assert!(ev.finish(None).clutter.is_empty(), "no filter: nothing reported (and nothing serialised)");
+        let mut ev = OnlineEvaluation::new(EvaluatorParams { figures: false, ..Default::default() });
+        for (rank, removed) in [(2, 0.99), (3, 0.97), (2, 0.98)] {
+            ev.add_map(map(CLUTTER_SVD, rank, removed));
+        }
+        let e = ev.finish(None);
+        assert_eq!(e.clutter.len(), 1);
+        let c = &e.clutter[0];
+        assert_eq!((c.filter.as_str(), c.order_min, c.order_max, c.maps), ("svd", 2, 3, 3));
+        assert!((c.removed_energy_mean - 0.98).abs() < 1e-12);
+        assert_eq!(c.describe(), "svd (rank 2–3, cut-off 0.050 PRF, 98.0 % of the energy removed on average; 3 maps)");
+        assert!(markdown(&e).contains("Clutter filter: svd (rank 2–3"));
     }
 }

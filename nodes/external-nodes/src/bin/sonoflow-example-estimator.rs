@@ -5,7 +5,7 @@
 //! ```toml
 //! [nodes.doppler.variants.external]
 //! exec = "sonoflow-example-estimator"
-//! ports = { iq = "IqFrameV2", vector = "VectorFieldV1", maps = "DopplerMapV1" }
+//! ports = { iq = "IqFrameV2", vector = "VectorFieldV1", maps = "DopplerMapV2" }
 //! ```
 //! `sonoflow run launch/quickstart.toml --swap doppler=external`.
 //!
@@ -17,7 +17,7 @@
 
 use sonoflow_messages::types::{DopplerMap, IqFrame, VectorField};
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV1, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, VECTOR_RAW,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, VECTOR_RAW,
 };
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Kit, Output};
 use std::collections::BTreeMap;
@@ -177,7 +177,7 @@ fn estimate(kit: &mut Kit, ports: &mut Ports, pairs: BTreeMap<(u64, u64), Pair>,
         }
         frame_id = h.common.frame_id.max(frame_id);
         if let Some(m) = ports.maps.as_mut() {
-            let mut mh = DopplerMapHeaderV1 {
+            let mut mh = DopplerMapHeaderV2 {
                 grid: h.grid,
                 fc: h.fc,
                 c: h.c,
