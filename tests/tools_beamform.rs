@@ -10,7 +10,7 @@ use sonoflow_beamform::testkit::centroid;
 use sonoflow_beamform::{
     to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
 };
-use sonoflow_doppler::{flags, DopplerEstimator, DopplerParams, Estimator, Packet};
+use sonoflow_doppler::{flags, ClutterParams, DopplerEstimator, DopplerParams, Estimator, Packet};
 use sonoflow_fileio::npy;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -325,6 +325,28 @@ fn doppler_tool_recovers_a_known_phase_rotation_and_matches_the_library() {
         let fl = npy::read(&dir.path().join(format!("w_{name}_flags.npy"))).unwrap();
         assert!(fl.data.iter().map(|v| *v as u8).collect::<Vec<_>>() == map.flags, "{name}: flags differ");
     }
+
+    // `--clutter`: the same as the library's filter then estimator, and reported in the sidecar.
+    let out = dir.path().join("svd.npy");
+    let (code, _, stderr) = cli(
+        "doppler",
+        &["--packet", s(&pk), "--param", s(&param), "--clutter", r#"{"type":"svd","rank":1}"#, "--out", s(&out)],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let mut frames: Vec<Vec<C32>> = (0..nf).map(|t| (0..nz * nx).map(|p| data[p * nf + t]).collect()).collect();
+    let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+    let svd = ClutterParams::Svd { rank: Some(1), tissue_cutoff: 0.05, max_rank: None };
+    let report = svd.apply_frames(&mut refs).unwrap();
+    let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
+    let map = DopplerEstimator::new(DopplerParams::new(fc, c, prf), nx, nz, 1.0)
+        .unwrap()
+        .estimate_to_map(Packet::Frames(&refs))
+        .unwrap();
+    let v: Vec<f32> = npy::read(&out).unwrap().data.iter().map(|v| *v as f32).collect();
+    assert!(v == map.velocity, "--clutter: velocity differs from the library");
+    let side = json(&out.with_extension("json"));
+    assert_eq!(side["clutter"]["order_or_rank"], 1);
+    assert!((side["clutter"]["removed_energy"].as_f64().unwrap() - report.removed_energy).abs() < 1e-12);
 }
 
 /// Runs a tool expecting failure: exit code 1, every `needles` in stderr, `out` not created.
@@ -432,6 +454,9 @@ fn beamform_tools_reject_bad_input_with_clear_errors() {
     dop(&["--estimator", "kasai2"], p, &["--estimator kasai2", "autocorrelation, loupas"]);
     dop(&["--estimator", "loupas"], p, &["loupas needs", "--dz"]);
     dop(&["--estimator", "loupas", "--dz", "-1"], p, &["--dz -1", "> 0"]);
+    dop(&["--clutter", r#"{"type":"fir"}"#], p, &["--clutter", "unknown variant `fir`"]);
+    dop(&["--clutter", r#"{"type":"iir","order":4,"cutoff":0.7}"#], p, &["--clutter", "clutter.cutoff"]);
+    dop(&["--clutter", r#"{"type":"svd","rank":4}"#], p, &["--clutter", "clutter.rank = 4"]);
     std::fs::write(d("noprf.json"), r#"{"fc": 5e6}"#).unwrap();
     dop(&[], s(&d("noprf.json")), &["missing `PRF`"]);
     std::fs::write(d("badprf.json"), r#"{"fc": 5e6, "PRF": -3}"#).unwrap();

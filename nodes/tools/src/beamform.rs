@@ -38,7 +38,9 @@ use serde::Deserialize;
 use sonoflow_beamform::{
     to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
 };
-use sonoflow_doppler::{flags, DopplerEstimator, DopplerParams, Estimator, Packet, WindowShape};
+use sonoflow_doppler::{
+    flags, ClutterParams, ClutterReport, DopplerEstimator, DopplerParams, Estimator, Packet, WindowShape,
+};
 use std::path::{Path, PathBuf};
 
 /// The MUST-named keys the beamforming tools read; every other key is ignored.
@@ -136,6 +138,11 @@ pub struct DopplerArgs {
     /// (0° transmit and receive). Default: `grid.dz` of the sidecar `<packet>.json` (as `sonoflow das` writes).
     #[arg(long, allow_hyphen_values = true)]
     pub dz: Option<f64>,
+    /// Clutter (wall) filter before the estimator, as the Doppler node's `clutter` table in JSON:
+    /// `{"type":"polynomial","order":1}`, `{"type":"iir","order":4,"cutoff":0.05}` (cut-off a
+    /// fraction of the PRF), `{"type":"svd"}` (adaptive rank) or `{"type":"svd","rank":2}`.
+    #[arg(long)]
+    pub clutter: Option<String>,
     /// Output `.npy`: velocity float32 (nz, nx); also `<stem>_power.npy`, `<stem>_variance.npy`,
     /// `<stem>_flags.npy` and the sidecar `<stem>.json`.
     #[arg(long)]
@@ -483,6 +490,21 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
 }
 
 /// Runs `sonoflow doppler`.
+/// Runs clutter filter `c` on a MUST-layout packet `data[pixel·n_frames + frame]` in place.
+fn clutter_pixel_major(c: &ClutterParams, data: &mut [C32], n_frames: usize) -> anyhow::Result<ClutterReport> {
+    let n_pix = data.len() / n_frames;
+    let mut frames: Vec<Vec<C32>> =
+        (0..n_frames).map(|t| (0..n_pix).map(|p| data[p * n_frames + t]).collect()).collect();
+    let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+    let report = c.apply_frames(&mut refs).map_err(|e| anyhow::anyhow!("--clutter: {e}"))?;
+    for (t, f) in frames.iter().enumerate() {
+        for (p, v) in f.iter().enumerate() {
+            data[p * n_frames + t] = *v;
+        }
+    }
+    Ok(report)
+}
+
 pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
     let (power_path, var_path, flags_path) =
         (sibling(&a.out, "power"), sibling(&a.out, "variance"), sibling(&a.out, "flags"));
@@ -552,8 +574,20 @@ pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
             }
         }
     };
-    let data = to_c32(&pk.data);
+    let clutter = match &a.clutter {
+        Some(s) => {
+            let c: ClutterParams = serde_json::from_str(s).map_err(|e| anyhow::anyhow!("--clutter {s}: {e}"))?;
+            c.validate().map_err(|e| anyhow::anyhow!("--clutter {s}: {e}"))?;
+            Some(c)
+        }
+        None => None,
+    };
+    let mut data = to_c32(&pk.data);
     let start = std::time::Instant::now();
+    let clutter_report = match &clutter {
+        Some(c) => Some(clutter_pixel_major(c, &mut data, nf)?),
+        None => None,
+    };
     let mut est = DopplerEstimator::new(params.clone(), nx, nz, dz)?;
     let map = est.estimate_to_map(Packet::PixelMajor { data: &data, n_frames: nf })?;
     let secs = start.elapsed().as_secs_f64();
@@ -588,6 +622,12 @@ pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
         "conventions": "shape (nz, nx); velocity m/s float32, positive toward the probe, 0 where no estimate; power = R0 float32; variance = 2 (V_N/pi)^2 (1 - |R1|/R0) m^2/s^2 float32; flags uint8 bits: 1 = no estimate, 2 = aliasing suspected (|arg R1| > 0.9 pi)",
         "seconds": secs,
     });
+    let mut sidecar = sidecar;
+    if let (Some(c), Some(r)) = (&clutter, &clutter_report) {
+        sidecar["clutter"] = serde_json::json!({
+            "params": c, "order_or_rank": r.order_or_rank, "cutoff": r.cutoff, "removed_energy": r.removed_energy,
+        });
+    }
     let side_out = write_sidecar(&a.out, &sidecar)?;
     println!(
         "{nz} × {nx} × {nf} packet → Doppler ({}, lag {}, window {}×{}, V_N {:.4} m/s): {no_est} no-estimate, {alias} aliasing pixels in {secs:.3} s: {} (+ _power, _variance, _flags, {})",
