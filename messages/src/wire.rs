@@ -84,13 +84,15 @@ pub const PARTICLE_FLUID: u32 = 0;
 pub const PARTICLE_WALL: u32 = 1;
 /// `ParticleV1::kind`: suspended rigid particle (platelet).
 pub const PARTICLE_PLATELET: u32 = 2;
+/// `ParticleV1::kind`: stationary tissue scatterer (outside the lumen; not part of the truth).
+pub const PARTICLE_TISSUE: u32 = 3;
 
 wire_struct! {
     /// One particle (32 bytes).
     pub struct ParticleV1 as "sonoflow_msgs/ParticleV1" {
         /// Stable id for the particle's life.
         pub id: u32,
-        /// `PARTICLE_FLUID`, `PARTICLE_WALL` or `PARTICLE_PLATELET`.
+        /// `PARTICLE_FLUID`, `PARTICLE_WALL`, `PARTICLE_PLATELET` or `PARTICLE_TISSUE`.
         pub kind: u32,
         pub x: f32,
         pub z: f32,

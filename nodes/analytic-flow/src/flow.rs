@@ -245,6 +245,22 @@ impl Geometry {
         }
     }
 
+    /// Distance (m) of a point outside the lumen to its boundary across the flow: a pipe's wall
+    /// (`|q| − D/2`, within the segment's length; +∞ beyond its ends), a disk's rim (`r − R`).
+    /// ≤ 0 inside.
+    pub(crate) fn outside_distance(&self, x: f64, z: f64) -> f64 {
+        match *self {
+            Geometry::Pipe { cx, cz, ax, az, half_d, length, .. } => {
+                let (dx, dz) = (x - cx, z - cz);
+                if (dx * ax + dz * az).abs() > 0.5 * length {
+                    return f64::INFINITY;
+                }
+                (-dx * az + dz * ax).abs() - half_d
+            }
+            Geometry::Disk { cx, cz, radius, .. } => (x - cx).hypot(z - cz) - radius,
+        }
+    }
+
     /// Maps two independent U[0, 1) draws to local coordinates that are
     /// uniformly distributed over the fluid area.
     pub(crate) fn local_from_unit(&self, u1: f64, u2: f64) -> (f64, f64) {

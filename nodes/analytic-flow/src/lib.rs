@@ -41,10 +41,12 @@
 mod flow;
 mod grid;
 mod schedule;
+pub mod tissue;
 
 pub use flow::FlowKind;
 pub use grid::{GridSpec, Truth};
 pub use schedule::{AcquisitionTime, Schedule};
+pub use tissue::{TissueParams, WallLayer};
 
 use flow::Geometry;
 use rand::{Rng, SeedableRng};
@@ -112,6 +114,8 @@ pub struct AnalyticFlowParams {
     pub schedule: Schedule,
     /// Upper bound on the scatterer count (error if exceeded). Default 2 000 000.
     pub max_particles: u32,
+    /// Stationary tissue around the lumen (absent: blood only), see [`tissue`].
+    pub tissue: Option<TissueParams>,
 }
 
 impl Default for AnalyticFlowParams {
@@ -123,6 +127,7 @@ impl Default for AnalyticFlowParams {
             seed: 1,
             schedule: Schedule::default(),
             max_particles: 2_000_000,
+            tissue: None,
         }
     }
 }
@@ -161,6 +166,9 @@ impl AnalyticFlowParams {
             format!("finite, 0 < value <= {MAX_AMPLITUDE_SIGMA}"),
         )?;
         self.schedule.validate()?;
+        if let Some(t) = &self.tissue {
+            t.validate()?;
+        }
         let area_mm2 = self.flow.area_m2() * 1.0e6;
         let expected = (self.density_per_mm2 * area_mm2).round();
         require(
@@ -261,6 +269,8 @@ pub struct AnalyticFlow {
     local_a: Vec<f64>,
     local_b: Vec<f64>,
     particles: Particles,
+    /// Stationary tissue scatterers (empty without `tissue`).
+    tissue: Particles,
 }
 
 impl AnalyticFlow {
@@ -287,6 +297,16 @@ impl AnalyticFlow {
             amplitude.push(normal.sample(&mut rng) as f32);
         }
         let t0 = params.schedule.t_start;
+        let tissue = match &params.tissue {
+            Some(t) => tissue::seed(t, &geometry, params.density_per_mm2, params.amplitude_sigma, n)?,
+            None => Particles::default(),
+        };
+        if u64::from(n) + tissue.len() as u64 > u64::from(params.max_particles) {
+            return Err(ParamError::TooManyParticles {
+                expected: u64::from(n) + tissue.len() as u64,
+                max_particles: params.max_particles,
+            });
+        }
         let mut flow = Self {
             params: params.clone(),
             geometry,
@@ -302,9 +322,15 @@ impl AnalyticFlow {
                 vz: vec![0.0; len],
                 amplitude,
             },
+            tissue,
         };
         flow.update_particles();
         Ok(flow)
+    }
+
+    /// The stationary tissue scatterers (ids after the blood's; empty without `tissue`).
+    pub fn tissue(&self) -> &Particles {
+        &self.tissue
     }
 
     /// Moves every scatterer exactly to time `t` (closed form from its

@@ -22,6 +22,7 @@ fn pipe_params(angle_deg: f64, v_max: f64) -> AnalyticFlowParams {
         seed: 7,
         schedule: Schedule { t_start: 0.1, ..Schedule::default() },
         max_particles: 2_000_000,
+        tissue: None,
     }
 }
 
@@ -33,6 +34,7 @@ fn disk_params(omega: f64) -> AnalyticFlowParams {
         seed: 11,
         schedule: Schedule::default(),
         max_particles: 2_000_000,
+        tissue: None,
     }
 }
 
@@ -474,4 +476,62 @@ fn params_from_toml() {
     assert!(toml::from_str::<AnalyticFlowParams>("[flow]\ntype = \"rotating-disk\"\nradius = 0.01").is_err());
     let json = serde_json::to_string(&p).expect("serialize");
     assert_eq!(serde_json::from_str::<AnalyticFlowParams>(&json).expect("parse"), p);
+}
+
+/// Tissue: outside the lumen only, static, about density × (region − lumen) scatterers, ids
+/// after the blood's, seeded; the wall layer's amplitudes carry its level; the blood is
+/// unchanged by adding tissue.
+#[test]
+fn tissue_fills_the_region_outside_the_lumen() {
+    let blood_only = AnalyticFlow::new(&pipe_params(10.0, 0.3)).unwrap();
+    let t = TissueParams { region: [-0.01, 0.012, 0.015, 0.035], density_per_mm2: 4.0, ..TissueParams::default() };
+    let p = AnalyticFlowParams { tissue: Some(t.clone()), ..pipe_params(10.0, 0.3) };
+    let mut flow = AnalyticFlow::new(&p).unwrap();
+    assert_eq!(flow.particles(), blood_only.particles(), "the blood does not depend on the tissue");
+    let ts = flow.tissue().clone();
+    let geom = crate::flow::Geometry::from_kind(&p.flow);
+    let n_blood = flow.particles().len() as u32;
+    let lumen_mm2 = (0..200 * 200)
+        .filter(|k| {
+            let (x, z) =
+                (-0.01 + 0.022 * ((k % 200) as f64 + 0.5) / 200.0, 0.015 + 0.02 * ((k / 200) as f64 + 0.5) / 200.0);
+            geom.velocity(x, z).is_some()
+        })
+        .count() as f64
+        / 40_000.0
+        * 440.0;
+    let expect = 4.0 * (440.0 - lumen_mm2);
+    assert!(
+        (ts.len() as f64 - expect).abs() < 4.0 * expect.sqrt(),
+        "{} tissue scatterers, expected ≈ {expect:.0}",
+        ts.len()
+    );
+    assert_eq!(ts.id[0], n_blood);
+    let sigma = t.sigma(p.density_per_mm2, p.amplitude_sigma);
+    assert!((sigma - 100.0 * (5.0f64 / 4.0).sqrt()).abs() < 1e-9, "40 dB and the density ratio: {sigma}");
+    let (mut wall, mut rest) = (Vec::new(), Vec::new());
+    for i in 0..ts.len() {
+        let (x, z) = (f64::from(ts.x[i]), f64::from(ts.z[i]));
+        assert!(geom.velocity(x, z).is_none(), "tissue inside the lumen at ({x}, {z})");
+        assert_eq!((ts.vx[i], ts.vz[i]), (0.0, 0.0));
+        let a2 = f64::from(ts.amplitude[i]).powi(2);
+        if geom.outside_distance(x, z) <= 0.6e-3 {
+            wall.push(a2)
+        } else {
+            rest.push(a2)
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let wall_db = 10.0 * (mean(&wall) / mean(&rest)).log10();
+    assert!((wall_db - 10.0).abs() < 1.5, "wall layer {wall_db:.2} dB above the tissue ({} scatterers)", wall.len());
+    flow.advance_to(0.2).unwrap();
+    assert_eq!(flow.tissue(), &ts, "static");
+    let again = AnalyticFlow::new(&p).unwrap();
+    assert_eq!(again.tissue(), &ts, "seeded");
+    let other =
+        AnalyticFlow::new(&AnalyticFlowParams { tissue: Some(TissueParams { seed: 3, ..t }), ..p.clone() }).unwrap();
+    assert_ne!(other.tissue().x, ts.x, "another seed moves the scatterers");
+    let bad =
+        AnalyticFlowParams { tissue: Some(TissueParams { tissue_to_blood_db: 99.0, ..TissueParams::default() }), ..p };
+    assert!(bad.validate().unwrap_err().to_string().starts_with("tissue.tissue_to_blood_db"));
 }

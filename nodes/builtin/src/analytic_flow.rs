@@ -49,10 +49,10 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         true => Some(kit.output::<VectorField>("truth")?),
         false => None,
     };
-    let n = flow.particles().len();
+    let n = flow.particles().len() + flow.tissue().len();
     if n > out.max_elements() {
         anyhow::bail!(
-            "the flow has {n} scatterers but topic `{}` allows max_elements = {}: raise it in the launch file or lower density_per_mm2",
+            "the flow has {n} scatterers but topic `{}` allows max_elements = {}: raise it in the launch file or lower density_per_mm2 (and tissue.density_per_mm2)",
             out.topic(),
             out.max_elements()
         );
@@ -71,7 +71,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let t0 = thread_cpu_ns();
         flow.advance_to(at.t)?;
-        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, flow.particles())?;
+        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, flow.particles(), flow.tissue())?;
         let compute = thread_cpu_ns() - t0;
         kit.published((n * 32) as u64, at.frame_id, at.t, compute)?;
         last_t = at.t;

@@ -8,7 +8,8 @@ use sonoflow_messages::*;
 use sonoflow_node_kit::Output;
 
 /// Publishes the fluid particles `ps` of frame `at` (of a schedule with `packet_size` frames per
-/// packet; `dt` the solver step, 0 for an analytic flow) with their bounding box.
+/// packet; `dt` the solver step, 0 for an analytic flow) with their bounding box, followed by the
+/// stationary `tissue` scatterers (kind `PARTICLE_TISSUE`; `n_fluid` counts the fluid only).
 /// An error naming the topic if they do not fit its `max_elements`.
 pub fn publish_fluid(
     out: &mut Output<ParticleSnapshot>,
@@ -16,18 +17,19 @@ pub fn publish_fluid(
     packet_size: u32,
     dt: f64,
     ps: &Particles,
+    tissue: &Particles,
 ) -> anyhow::Result<()> {
-    let n = ps.len();
+    let n = ps.len() + tissue.len();
     if n > out.max_elements() {
         anyhow::bail!(
-            "the flow has {n} fluid particles but topic `{}` allows max_elements = {}: raise it in the launch file",
+            "the flow has {n} scatterers (fluid and tissue) but topic `{}` allows max_elements = {}: raise it in the launch file",
             out.topic(),
             out.max_elements()
         );
     }
     let mut h = ParticleSnapshotHeaderV1 {
         n_particles: n as u32,
-        n_fluid: n as u32,
+        n_fluid: ps.len() as u32,
         dt,
         bbox: ps.bbox(),
         packet: at.packet,
@@ -38,15 +40,17 @@ pub fn publish_fluid(
     h.common.frame_id = at.frame_id;
     h.common.t_valid = at.t;
     out.publish_in_place(n, h, |dst| {
-        for (i, d) in dst.iter_mut().enumerate() {
+        let all = [(ps, PARTICLE_FLUID), (tissue, PARTICLE_TISSUE)];
+        let src = all.iter().flat_map(|(p, kind)| (0..p.len()).map(move |i| (*p, *kind, i)));
+        for (d, (p, kind, i)) in dst.iter_mut().zip(src) {
             d.write(ParticleV1 {
-                id: ps.id[i],
-                kind: PARTICLE_FLUID,
-                x: ps.x[i],
-                z: ps.z[i],
-                vx: ps.vx[i],
-                vz: ps.vz[i],
-                amplitude: ps.amplitude[i],
+                id: p.id[i],
+                kind,
+                x: p.x[i],
+                z: p.z[i],
+                vx: p.vx[i],
+                vz: p.vz[i],
+                amplitude: p.amplitude[i],
                 reserved: 0.0,
             });
         }
