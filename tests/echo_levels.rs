@@ -1,10 +1,10 @@
 //! Echo levels defined on the beamformed data: an analytic vessel with tissue set
 //! `tissue_to_blood_db` above the blood, simulated (SIMUS, paper probe, plane wave 0°) and
-//! beamformed (rf2iq → DAS, f-number 1.5) for the blood and the tissue separately, averaged over
-//! four realisations (the chain is
-//! linear, so each region's power is its own echo, without the other's side lobes); the mean
-//! I/Q power of the tissue region over the lumen's is the set value within 1 dB, and the wall
-//! layer sits its `level_db` above the tissue within 1.5 dB.
+//! beamformed (rf2iq → DAS, f-number 1.5) for the blood and the tissue separately (the chain is
+//! linear, so each region's power is its own echo, without the other's side lobes), powers
+//! averaged over four realisations: the mean I/Q power of the tissue region over the lumen's is
+//! the set value within 1 dB, and the wall layer sits its `level_db` above the tissue within
+//! 1.5 dB.
 
 #![allow(clippy::unwrap_used)]
 
