@@ -7,10 +7,12 @@
 
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::{ParticleSnapshotHeaderV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, SAMPLE_RF_F32};
+use sonoflow_messages::{
+    ParticleSnapshotHeaderV1, ParticleV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, PARTICLE_TISSUE, SAMPLE_RF_F32,
+};
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
-use sonoflow_simus::{FramePlanner, FrequencyPlan, NoiseModel, Scan, ScanParams, Simus};
+use sonoflow_simus::{FramePlanner, FrequencyPlan, NoiseModel, NoiseParams, Scan, ScanParams, Simus, Transmit};
 
 /// The `simus` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -62,10 +64,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             let rh = rf_header(&p, &scan, &pl, &h, tx_id);
             let n = n_el * pl.n_samples;
             if let (Some(np), None) = (&p.noise, &noise) {
-                noise = Some(
-                    NoiseModel::new(np.clone(), scan.probe.fc, scan.probe.bandwidth, pl.fs)
-                        .map_err(anyhow::Error::msg)?,
-                );
+                noise = Some(noise_model(np, &scan, &pl, sample.payload(), tx, &mut simus)?);
             }
             let r = out.publish_init(n, rh, |buf, hdr| {
                 simus.simulate_into(scat, tx, &pl, buf)?;
@@ -117,6 +116,29 @@ fn rf_header(
     rh.common.frame_id = h.common.frame_id * scan.transmits.len() as u64 + tx_id as u64;
     rh.common.t_valid = h.common.t_valid;
     rh
+}
+
+/// The receive-noise model, calibrated so that its SNR is against the blood: on the RF of the
+/// snapshot's non-tissue scatterers for transmit `tx`.
+fn noise_model(
+    np: &NoiseParams,
+    scan: &Scan,
+    pl: &FrequencyPlan,
+    particles: &[ParticleV1],
+    tx: &Transmit,
+    simus: &mut Simus,
+) -> anyhow::Result<NoiseModel> {
+    let mut m = NoiseModel::new(np.clone(), scan.probe.fc, scan.probe.bandwidth, pl.fs).map_err(anyhow::Error::msg)?;
+    let (mut x, mut z, mut rc) = (Vec::new(), Vec::new(), Vec::new());
+    for q in particles.iter().filter(|q| q.kind != PARTICLE_TISSUE) {
+        x.push(q.x);
+        z.push(q.z);
+        rc.push(q.amplitude);
+    }
+    let mut rf = vec![0f32; scan.probe.n_elements * pl.n_samples];
+    simus.simulate_into(sonoflow_simus::ScattererSlices { x: &x, z: &z, rc: &rc }, tx, pl, &mut rf)?;
+    m.calibrate(&rf).map_err(anyhow::Error::msg)?;
+    Ok(m)
 }
 
 #[cfg(test)]

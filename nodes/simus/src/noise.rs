@@ -1,10 +1,11 @@
 //! Receive noise: additive white Gaussian noise per channel at a set signal-to-noise ratio,
 //! seeded and reproducible frame by frame.
 //!
-//! **Definition.** SNR = P_s / P_n,band in dB, where P_s is the mean power of the echoes — the
-//! mean of rf² over every channel and sample of the first RF frame the model sees (the
-//! calibration frame; SIMUS's RF is already limited to the probe band by its pulse and probe
-//! response) — and P_n,band the noise power inside the probe band [fc (1 − B/2), fc (1 + B/2)]
+//! **Definition.** SNR = P_s / P_n,band in dB, where P_s is the mean power of the blood echoes —
+//! the mean of rf² over every channel and sample of a calibration frame simulated from the blood
+//! scatterers alone ([`NoiseModel::calibrate`]; the `simus` node uses the first frame's fluid
+//! scatterers, leaving tissue out; without it, the first frame the model sees; SIMUS's RF is
+//! already limited to the probe band by its pulse and probe response) — and P_n,band the noise power inside the probe band [fc (1 − B/2), fc (1 + B/2)]
 //! (B the probe's fractional bandwidth, clipped to [0, fs/2]). The noise is white over
 //! [0, fs/2], so its total variance is σ² = P_s / 10^(SNR/10) / ((f_hi − f_lo) / (fs/2)).
 //! σ is fixed at calibration: later frames get the same noise level whatever their echo power.
@@ -74,23 +75,28 @@ impl NoiseModel {
         self.sigma
     }
 
-    /// Adds noise to `rf` (any layout), frame `key`; the first call calibrates σ on `rf` itself.
-    /// A calibration frame without echo power gives an error (the SNR would be undefined).
+    /// Sets σ from the RF of the blood echoes alone (`blood_rf`, a frame simulated from the
+    /// blood scatterers only: the SNR is against the blood, not the tissue). An RF without echo
+    /// power gives an error (the SNR would be undefined).
+    pub fn calibrate(&mut self, blood_rf: &[f32]) -> Result<f64, String> {
+        let ps = blood_rf.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>() / blood_rf.len().max(1) as f64;
+        if !(ps.is_finite() && ps > 0.0) {
+            return Err(format!(
+                "noise: the calibration frame has echo power {ps:e}: no signal to set snr_db = {} against",
+                self.params.snr_db
+            ));
+        }
+        let s = (ps / 10f64.powf(self.params.snr_db / 10.0) / self.band_fraction).sqrt();
+        self.sigma = Some(s);
+        Ok(s)
+    }
+
+    /// Adds noise to `rf` (any layout), frame `key`; without a [`Self::calibrate`] before, the
+    /// first call calibrates σ on `rf` itself (all of its echoes count as signal).
     pub fn add(&mut self, rf: &mut [f32], key: u64) -> Result<(), String> {
         let sigma = match self.sigma {
             Some(s) => s,
-            None => {
-                let ps = rf.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>() / rf.len().max(1) as f64;
-                if !(ps.is_finite() && ps > 0.0) {
-                    return Err(format!(
-                        "noise: the calibration frame has echo power {ps:e}: no signal to set snr_db = {} against",
-                        self.params.snr_db
-                    ));
-                }
-                let s = (ps / 10f64.powf(self.params.snr_db / 10.0) / self.band_fraction).sqrt();
-                self.sigma = Some(s);
-                s
-            }
+            None => self.calibrate(rf)?,
         };
         let mut rng = ChaCha8Rng::seed_from_u64(self.params.seed);
         rng.set_stream(key);

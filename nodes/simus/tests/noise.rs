@@ -63,3 +63,21 @@ fn testkit_noisy_frame_measures_the_set_snr() {
         assert!((measured - snr_db).abs() < 0.5, "{snr_db}: {measured}");
     }
 }
+
+/// `calibrate` sets the level on the blood frame it is given: a frame with 40 dB louder echoes
+/// (tissue) later gets the same σ, and the noise is the set SNR below the blood.
+#[test]
+fn calibration_on_the_blood_frame_sets_the_level() {
+    let (clean, n, fs, probe) = frame();
+    let ps = clean.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / clean.len() as f64;
+    let mut m = NoiseModel::new(NoiseParams { snr_db: 10.0, seed: 1 }, probe.fc, probe.bandwidth, fs).unwrap();
+    let sigma = m.calibrate(&clean).unwrap();
+    let loud: Vec<f32> = clean.iter().map(|v| v * 100.0).collect();
+    let mut noisy = loud.clone();
+    m.add(&mut noisy, 3).unwrap();
+    assert_eq!(m.sigma(), Some(sigma), "not re-calibrated on the loud frame");
+    let noise: Vec<f32> = noisy.iter().zip(&loud).map(|(a, b)| a - b).collect();
+    let (lo, hi) = (probe.fc * (1.0 - probe.bandwidth / 2.0), probe.fc * (1.0 + probe.bandwidth / 2.0));
+    let measured = 10.0 * (ps / band_power(&noise, n, fs, lo, hi)).log10();
+    assert!((measured - 10.0).abs() < 0.5, "{measured}");
+}
