@@ -12,7 +12,9 @@ use sonoflow_messages::{
 };
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
-use sonoflow_simus::{FramePlanner, FrequencyPlan, NoiseModel, NoiseParams, Scan, ScanParams, Simus, Transmit};
+use sonoflow_simus::{
+    FramePlanner, FrequencyPlan, NoiseModel, NoiseParams, Scan, ScanParams, Simus, StaticEchoes, Transmit,
+};
 
 /// The `simus` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -36,21 +38,17 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let mut out = kit.output::<RfFrame>("rf")?;
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_el = scan.probe.n_elements;
-    let (mut xs, mut zs, mut rcs) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut scene, mut statics) = (Scene::default(), StaticEchoes::default());
     let mut noise: Option<NoiseModel> = None;
     transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
-        xs.clear();
-        zs.clear();
-        rcs.clear();
-        for q in sample.payload() {
-            xs.push(q.x);
-            zs.push(q.z);
-            rcs.push(q.amplitude);
-        }
-        let scat = sonoflow_simus::ScattererSlices { x: &xs, z: &zs, rc: &rcs };
-        let choice = planner.plan(&simus, scat, h.frame_in_packet == 0)?;
+        scene.fill(sample.payload());
+        let all = sonoflow_simus::ScattererSlices { x: &scene.x, z: &scene.z, rc: &scene.rc };
+        let choice = planner.plan(&simus, all, h.frame_in_packet == 0)?;
+        let m = scene.n_moving;
+        statics.set(&scene.x[m..], &scene.z[m..], &scene.rc[m..]);
+        let scat = sonoflow_simus::ScattererSlices { x: &scene.x[..m], z: &scene.z[..m], rc: &scene.rc[..m] };
         if choice.replanned_in_packet {
             eprintln!(
                 "simus: scatterers moved beyond plan_margin within packet {} (frame {}): re-planning; raise plan_margin to keep one plan per packet",
@@ -68,6 +66,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             }
             let r = out.publish_init(n, rh, |buf, hdr| {
                 simus.simulate_into(scat, tx, &pl, buf)?;
+                statics.add_into(&mut simus, tx, tx_id, &pl, buf)?;
                 if let Some(m) = noise.as_mut() {
                     m.add(buf, hdr.common.frame_id).map_err(anyhow::Error::msg)?;
                 }
@@ -116,6 +115,32 @@ fn rf_header(
     rh.common.frame_id = h.common.frame_id * scan.transmits.len() as u64 + tx_id as u64;
     rh.common.t_valid = h.common.t_valid;
     rh
+}
+
+/// A snapshot's scatterers as SIMUS slices: the moving ones first (`..n_moving`), then the
+/// stationary tissue (`PARTICLE_TISSUE`), whose RF [`StaticEchoes`] computes once per plan.
+#[derive(Default)]
+struct Scene {
+    x: Vec<f32>,
+    z: Vec<f32>,
+    rc: Vec<f32>,
+    n_moving: usize,
+}
+
+impl Scene {
+    fn fill(&mut self, particles: &[ParticleV1]) {
+        self.x.clear();
+        self.z.clear();
+        self.rc.clear();
+        let moving = particles.iter().filter(|q| q.kind != PARTICLE_TISSUE);
+        let tissue = particles.iter().filter(|q| q.kind == PARTICLE_TISSUE);
+        for q in moving.chain(tissue) {
+            self.x.push(q.x);
+            self.z.push(q.z);
+            self.rc.push(q.amplitude);
+        }
+        self.n_moving = particles.iter().filter(|q| q.kind != PARTICLE_TISSUE).count();
+    }
 }
 
 /// The receive-noise model, calibrated so that its SNR is against the blood: on the RF of the

@@ -65,6 +65,7 @@ pub mod pulse;
 pub mod scan;
 mod scatterers;
 mod simus;
+pub mod statics;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 mod transmit;
@@ -78,6 +79,7 @@ pub use probe::{Baffle, Probe, PRESET_NAMES};
 pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams};
 pub use scatterers::{ScattererSlices, Scatterers};
 pub use simus::{zero_small_values, RfFrame, Simus};
+pub use statics::StaticEchoes;
 pub use transmit::Transmit;
 
 /// Normalised RMS difference `‖a − b‖₂ / ‖b‖₂` (f64 sums); `b` is the reference. Returns 0 when
