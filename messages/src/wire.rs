@@ -86,6 +86,9 @@ pub const PARTICLE_WALL: u32 = 1;
 pub const PARTICLE_PLATELET: u32 = 2;
 /// `ParticleV1::kind`: stationary tissue scatterer (outside the lumen; not part of the truth).
 pub const PARTICLE_TISSUE: u32 = 3;
+/// `ParticleV1::kind`: moving tissue scatterer (pulsating wall, bulk motion; outside the lumen,
+/// not part of the truth): simulated in every frame, not cached as static.
+pub const PARTICLE_TISSUE_MOVING: u32 = 4;
 
 wire_struct! {
     /// One particle (32 bytes).

@@ -261,6 +261,33 @@ impl Geometry {
         }
     }
 
+    /// Unit normal pointing away from the lumen at a point outside it: across a pipe's axis, radial
+    /// from a disk's centre ((0, 0) on the axis or at the centre).
+    pub(crate) fn outward_normal(&self, x: f64, z: f64) -> (f64, f64) {
+        match *self {
+            Geometry::Pipe { cx, cz, ax, az, .. } => {
+                let q = -(x - cx) * az + (z - cz) * ax;
+                let s = if q > 0.0 {
+                    1.0
+                } else if q < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+                (-az * s, ax * s)
+            }
+            Geometry::Disk { cx, cz, .. } => {
+                let (dx, dz) = (x - cx, z - cz);
+                let r = dx.hypot(dz);
+                if r > 0.0 {
+                    (dx / r, dz / r)
+                } else {
+                    (0.0, 0.0)
+                }
+            }
+        }
+    }
+
     /// Maps two independent U[0, 1) draws to local coordinates that are
     /// uniformly distributed over the fluid area.
     pub(crate) fn local_from_unit(&self, u1: f64, u2: f64) -> (f64, f64) {

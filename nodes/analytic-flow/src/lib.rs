@@ -40,11 +40,13 @@
 
 mod flow;
 mod grid;
+pub mod motion;
 mod schedule;
 pub mod tissue;
 
 pub use flow::FlowKind;
 pub use grid::{GridSpec, Truth};
+pub use motion::{BulkMotion, Pulsation, Rigid};
 pub use schedule::{AcquisitionTime, Schedule};
 pub use tissue::{TissueParams, WallLayer};
 
@@ -114,8 +116,10 @@ pub struct AnalyticFlowParams {
     pub schedule: Schedule,
     /// Upper bound on the scatterer count (error if exceeded). Default 2 000 000.
     pub max_particles: u32,
-    /// Stationary tissue around the lumen (absent: blood only), see [`tissue`].
+    /// Tissue around the lumen (absent: blood only), see [`tissue`].
     pub tissue: Option<TissueParams>,
+    /// Rigid bulk motion of the whole scene (absent: none), see [`motion`].
+    pub bulk: Option<BulkMotion>,
 }
 
 impl Default for AnalyticFlowParams {
@@ -128,6 +132,7 @@ impl Default for AnalyticFlowParams {
             schedule: Schedule::default(),
             max_particles: 2_000_000,
             tissue: None,
+            bulk: None,
         }
     }
 }
@@ -168,6 +173,9 @@ impl AnalyticFlowParams {
         self.schedule.validate()?;
         if let Some(t) = &self.tissue {
             t.validate()?;
+        }
+        if let Some(b) = &self.bulk {
+            b.validate()?;
         }
         let area_mm2 = self.flow.area_m2() * 1.0e6;
         let expected = (self.density_per_mm2 * area_mm2).round();
@@ -269,8 +277,10 @@ pub struct AnalyticFlow {
     local_a: Vec<f64>,
     local_b: Vec<f64>,
     particles: Particles,
-    /// Stationary tissue scatterers (empty without `tissue`).
+    /// Tissue scatterers (empty without `tissue`).
     tissue: Particles,
+    /// Their rest states for the wall pulsation (see `tissue::rest_states`).
+    tissue_rest: Vec<[f64; 4]>,
 }
 
 impl AnalyticFlow {
@@ -301,6 +311,10 @@ impl AnalyticFlow {
             Some(t) => tissue::seed(t, &geometry, params.density_per_mm2, params.amplitude_sigma, n)?,
             None => Particles::default(),
         };
+        let tissue_rest = match &params.tissue {
+            Some(t) => tissue::rest_states(t, &geometry, &tissue),
+            None => Vec::new(),
+        };
         if u64::from(n) + tissue.len() as u64 > u64::from(params.max_particles) {
             return Err(ParamError::TooManyParticles {
                 expected: u64::from(n) + tissue.len() as u64,
@@ -323,14 +337,27 @@ impl AnalyticFlow {
                 amplitude,
             },
             tissue,
+            tissue_rest,
         };
         flow.update_particles();
         Ok(flow)
     }
 
-    /// The stationary tissue scatterers (ids after the blood's; empty without `tissue`).
+    /// The tissue scatterers at the current time (ids after the blood's; empty without `tissue`).
     pub fn tissue(&self) -> &Particles {
         &self.tissue
+    }
+
+    /// True when the tissue moves (a wall pulsation of non-zero amplitude, or bulk motion);
+    /// false when it is static and its echoes can be computed once.
+    pub fn tissue_moves(&self) -> bool {
+        let pulses = self.params.tissue.as_ref().and_then(|t| t.pulsation.as_ref()).is_some_and(|p| p.amplitude > 0.0);
+        pulses || self.params.bulk.is_some()
+    }
+
+    /// The bulk motion's transform at time `t` (the identity without `bulk`).
+    pub fn rigid_at(&self, t: f64) -> Rigid {
+        self.params.bulk.as_ref().map_or(Rigid::IDENTITY, |b| b.at(t))
     }
 
     /// Moves every scatterer exactly to time `t` (closed form from its
@@ -355,6 +382,7 @@ impl AnalyticFlow {
     fn update_particles(&mut self) {
         let geom = self.geometry;
         let dt = self.t - self.t_seed;
+        let rigid = self.params.bulk.as_ref().map(|b| b.at(self.t));
         let p = &mut self.particles;
         (
             p.x.par_chunks_mut(CHUNK),
@@ -369,12 +397,38 @@ impl AnalyticFlow {
                 let outs = x.iter_mut().zip(z.iter_mut()).zip(vx.iter_mut().zip(vz));
                 for (((x, z), (vx, vz)), (&a, &b)) in outs.zip(a.iter().zip(b)) {
                     let s = geom.state(a, b, dt);
-                    *x = s.x as f32;
-                    *z = s.z as f32;
-                    *vx = s.vx as f32;
-                    *vz = s.vz as f32;
+                    let [sx, sz, svx, svz] = match &rigid {
+                        Some(r) => r.apply(s.x, s.z, s.vx, s.vz),
+                        None => [s.x, s.z, s.vx, s.vz],
+                    };
+                    *x = sx as f32;
+                    *z = sz as f32;
+                    *vx = svx as f32;
+                    *vz = svz as f32;
                 }
             });
+        self.update_tissue(rigid);
+    }
+
+    /// Moves the tissue: rest position + w(t)·reach·n (pulsation), then the bulk motion.
+    fn update_tissue(&mut self, rigid: Option<Rigid>) {
+        if !self.tissue_moves() {
+            return;
+        }
+        let pulsation = self.params.tissue.as_ref().and_then(|t| t.pulsation.as_ref());
+        let (w, dw) = pulsation.map_or((0.0, 0.0), |p| p.waveform(self.t));
+        let p = &mut self.tissue;
+        for (i, &[x0, z0, px, pz]) in self.tissue_rest.iter().enumerate() {
+            let (x, z, vx, vz) = (x0 + w * px, z0 + w * pz, dw * px, dw * pz);
+            let [x, z, vx, vz] = match &rigid {
+                Some(r) => r.apply(x, z, vx, vz),
+                None => [x, z, vx, vz],
+            };
+            p.x[i] = x as f32;
+            p.z[i] = z as f32;
+            p.vx[i] = vx as f32;
+            p.vz[i] = vz as f32;
+        }
     }
 
     /// Current scatterers.
@@ -392,7 +446,8 @@ impl AnalyticFlow {
         &self.params
     }
 
-    /// Exact velocity (vx, vz) (m/s) at (x, z), `None` outside the fluid.
+    /// Exact velocity (vx, vz) (m/s) at (x, z), `None` outside the fluid, in the scene's own
+    /// frame (without `bulk` motion; [`sample_truth_at`](Self::sample_truth_at) includes it).
     /// The field is steady, so this does not depend on the current time.
     /// Points on the boundary count as inside; a scatterer lying on the
     /// boundary may round (f32) to just outside it.
@@ -400,7 +455,14 @@ impl AnalyticFlow {
         self.geometry.velocity(x, z)
     }
 
-    /// Exact field at the nodes of `grid`. The grid must satisfy
+    /// Exact lab-frame field at the nodes of `grid` at time `t` (bulk motion moves the lumen and
+    /// adds its velocity; without `bulk` the field is the same at every time). An error for an
+    /// invalid grid.
+    pub fn sample_truth_at(&self, grid: &GridSpec, t: f64) -> Result<Truth, ParamError> {
+        self.truth_with(grid, self.params.bulk.as_ref().map(|b| b.at(t)))
+    }
+
+    /// Exact field at the nodes of `grid` at the current time. The grid must satisfy
     /// [`GridSpec::validate`]; for an invalid grid this returns an empty
     /// [`Truth`] (use [`try_sample_truth`](Self::try_sample_truth) to get the
     /// error instead).
@@ -410,6 +472,10 @@ impl AnalyticFlow {
 
     /// Like [`sample_truth`](Self::sample_truth) but reports an invalid grid.
     pub fn try_sample_truth(&self, grid: &GridSpec) -> Result<Truth, ParamError> {
+        self.sample_truth_at(grid, self.t)
+    }
+
+    fn truth_with(&self, grid: &GridSpec, rigid: Option<Rigid>) -> Result<Truth, ParamError> {
         grid.validate()?;
         let nx = grid.nx as usize;
         let n = nx * grid.nz as usize;
@@ -423,7 +489,15 @@ impl AnalyticFlow {
                 let iz = iz as u32;
                 for (ix, ((vx, vz), m)) in vx.iter_mut().zip(vz).zip(mask).enumerate() {
                     let (x, z) = grid.node(ix as u32, iz);
-                    if let Some((u, w)) = geom.velocity(x, z) {
+                    let (sx, sz) = rigid.map_or((x, z), |r| r.invert(x, z));
+                    if let Some((u, w)) = geom.velocity(sx, sz) {
+                        let (u, w) = match &rigid {
+                            Some(r) => {
+                                let [_, _, u, w] = r.apply(sx, sz, u, w);
+                                (u, w)
+                            }
+                            None => (u, w),
+                        };
                         *vx = u as f32;
                         *vz = w as f32;
                         *m = 1;

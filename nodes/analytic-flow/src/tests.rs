@@ -23,6 +23,7 @@ fn pipe_params(angle_deg: f64, v_max: f64) -> AnalyticFlowParams {
         schedule: Schedule { t_start: 0.1, ..Schedule::default() },
         max_particles: 2_000_000,
         tissue: None,
+        bulk: None,
     }
 }
 
@@ -35,6 +36,7 @@ fn disk_params(omega: f64) -> AnalyticFlowParams {
         schedule: Schedule::default(),
         max_particles: 2_000_000,
         tissue: None,
+        bulk: None,
     }
 }
 
@@ -534,4 +536,113 @@ fn tissue_fills_the_region_outside_the_lumen() {
     let bad =
         AnalyticFlowParams { tissue: Some(TissueParams { tissue_to_blood_db: 99.0, ..TissueParams::default() }), ..p };
     assert!(bad.validate().unwrap_err().to_string().starts_with("tissue.tissue_to_blood_db"));
+}
+
+/// Wall pulsation: every tissue scatterer sits at its rest position + w(t)·A·e^(−d/λ)·n with
+/// d and n computed here from the vessel's axis (independently of `Geometry`), to f32 rounding;
+/// its velocity is the derivative; it never enters the lumen; the blood and the truth are
+/// unchanged; the wire kind is "moving".
+#[test]
+fn wall_pulsation_follows_the_waveform() {
+    let pulse = Pulsation { amplitude: 0.4e-3, period: 0.5, decay_length: 2e-3, t0: 0.05 };
+    let t = TissueParams {
+        region: [-0.01, 0.012, 0.015, 0.035],
+        density_per_mm2: 2.0,
+        pulsation: Some(pulse.clone()),
+        ..TissueParams::default()
+    };
+    let p = AnalyticFlowParams { tissue: Some(t), ..pipe_params(10.0, 0.3) };
+    let mut flow = AnalyticFlow::new(&p).unwrap();
+    let mut still = AnalyticFlow::new(&AnalyticFlowParams { tissue: None, ..p.clone() }).unwrap();
+    assert!(flow.tissue_moves() && !still.tissue_moves());
+    // The rest positions: at t0 + k·T the waveform is 0.
+    flow.advance_to(0.55).unwrap();
+    let rest = flow.tissue().clone();
+    let (cx, cz, th) = (0.001f64, 0.025f64, 10f64.to_radians());
+    let (ax, az) = (th.cos(), th.sin());
+    let grid = GridSpec { nx: 30, nz: 30, x0: -0.01, z0: 0.015, dx: 0.7e-3, dz: 0.7e-3 };
+    for time in [0.6, 0.675, 0.8, 0.93] {
+        flow.advance_to(time).unwrap();
+        still.advance_to(time).unwrap();
+        assert_eq!(flow.particles(), still.particles(), "the blood does not feel the pulsation");
+        assert_eq!(flow.sample_truth(&grid), still.sample_truth(&grid), "nor does the truth");
+        let phase = std::f64::consts::TAU * (time - 0.05) / 0.5;
+        let (w, dw) = (0.5 * (1.0 - phase.cos()), 0.5 * std::f64::consts::TAU / 0.5 * phase.sin());
+        let ts = flow.tissue();
+        let mut max_shift: f64 = 0.0;
+        for i in 0..ts.len() {
+            let (x0, z0) = (f64::from(rest.x[i]), f64::from(rest.z[i]));
+            let (s, q) = ((x0 - cx) * ax + (z0 - cz) * az, -(x0 - cx) * az + (z0 - cz) * ax);
+            let reach = if s.abs() <= 0.02 { 0.4e-3 * (-(q.abs() - 3e-3) / 2e-3).exp() } else { 0.0 };
+            let (nx, nz) = (-az * q.signum(), ax * q.signum());
+            let (x, z) = (f64::from(ts.x[i]), f64::from(ts.z[i]));
+            assert!((x - (x0 + w * reach * nx)).abs() <= 2.0 * HALF_ULP_POS, "x of {i} at t = {time}");
+            assert!((z - (z0 + w * reach * nz)).abs() <= 2.0 * HALF_ULP_POS, "z of {i} at t = {time}");
+            assert!((f64::from(ts.vx[i]) - dw * reach * nx).abs() <= 1e-9, "vx of {i}");
+            assert!((f64::from(ts.vz[i]) - dw * reach * nz).abs() <= 1e-9, "vz of {i}");
+            let q_now = -(x - cx) * az + (z - cz) * ax;
+            assert!(q_now.abs() >= q.abs() - 2.0 * HALF_ULP_POS, "moved towards the lumen");
+            max_shift = max_shift.max((x - x0).hypot(z - z0));
+        }
+        assert!(max_shift > 0.9 * 0.4e-3 * w, "the wall moves by A·w(t): {max_shift} at w = {w}");
+    }
+}
+
+/// Bulk motion: blood and tissue move rigidly with the scene; blood velocities are the
+/// lab-frame ones (the flow's turned, plus the rotation and translation rates); the truth follows
+/// the lumen and matches the scatterers that sit at its nodes.
+#[test]
+fn bulk_motion_moves_the_whole_scene_rigidly() {
+    let bulk =
+        BulkMotion { amplitude: [1.5e-3, -0.8e-3], rotation_deg: 4.0, center: [0.0, 0.02], period: 1.0, t0: 0.1 };
+    let tissue = TissueParams { region: [-0.01, 0.012, 0.015, 0.035], density_per_mm2: 1.0, ..TissueParams::default() };
+    let base = AnalyticFlowParams { tissue: Some(tissue), ..pipe_params(10.0, 0.3) };
+    let p = AnalyticFlowParams { bulk: Some(bulk.clone()), ..base.clone() };
+    let mut flow = AnalyticFlow::new(&p).unwrap();
+    let mut still = AnalyticFlow::new(&base).unwrap();
+    assert!(flow.tissue_moves() && !still.tissue_moves());
+    let grid = GridSpec { nx: 40, nz: 40, x0: -0.01, z0: 0.015, dx: 0.5e-3, dz: 0.5e-3 };
+    for time in [0.1, 0.27, 0.4, 0.61] {
+        flow.advance_to(time).unwrap();
+        still.advance_to(time).unwrap();
+        let r = bulk.at(time);
+        let (a, b) = (flow.particles(), still.particles());
+        for i in 0..a.len() {
+            let [x, z, vx, vz] = r.apply(f64::from(b.x[i]), f64::from(b.z[i]), f64::from(b.vx[i]), f64::from(b.vz[i]));
+            assert!((f64::from(a.x[i]) - x).abs() < 1e-8 && (f64::from(a.z[i]) - z).abs() < 1e-8, "blood {i}");
+            assert!((f64::from(a.vx[i]) - vx).abs() < 1e-6 && (f64::from(a.vz[i]) - vz).abs() < 1e-6, "blood {i}");
+        }
+        let (a, b) = (flow.tissue(), still.tissue());
+        for i in 0..a.len() {
+            let [x, z, vx, vz] = r.apply(f64::from(b.x[i]), f64::from(b.z[i]), 0.0, 0.0);
+            assert!((f64::from(a.x[i]) - x).abs() < 1e-8 && (f64::from(a.z[i]) - z).abs() < 1e-8, "tissue {i}");
+            assert!((f64::from(a.vx[i]) - vx).abs() < 1e-9 && (f64::from(a.vz[i]) - vz).abs() < 1e-9, "tissue {i}");
+        }
+        // The truth is the lab-frame field: the rigid velocity field's value at a node, flow
+        // turned with the scene, inside the moved lumen only.
+        let truth = flow.sample_truth_at(&grid, time).unwrap();
+        let still_mask = still.sample_truth(&grid).mask;
+        let (mut inside, mut changed) = (0, 0);
+        for iz in 0..grid.nz {
+            for ix in 0..grid.nx {
+                let k = (iz * grid.nx + ix) as usize;
+                let (x, z) = grid.node(ix, iz);
+                let (sx, sz) = r.invert(x, z);
+                match flow.velocity(sx, sz) {
+                    Some((u, w)) => {
+                        let [_, _, u, w] = r.apply(sx, sz, u, w);
+                        assert_eq!(truth.mask[k], 1);
+                        assert!((f64::from(truth.vx[k]) - u).abs() < 1e-6 && (f64::from(truth.vz[k]) - w).abs() < 1e-6);
+                        inside += 1;
+                    }
+                    None => assert_eq!(truth.mask[k], 0),
+                }
+                changed += usize::from(truth.mask[k] != still_mask[k]);
+            }
+        }
+        assert!(inside > 100, "{inside} nodes in the lumen");
+        if time != 0.1 {
+            assert!(changed > 0, "the lumen moved at t = {time}");
+        }
+    }
 }

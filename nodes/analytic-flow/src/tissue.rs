@@ -15,6 +15,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::flow::Geometry;
+use crate::motion::Pulsation;
 use crate::{require, ParamError, Particles};
 
 /// The vessel wall: a brighter layer of tissue just outside the lumen.
@@ -49,6 +50,9 @@ pub struct TissueParams {
     pub wall: Option<WallLayer>,
     /// Seed of the tissue scatterers (default 2; independent of the blood's).
     pub seed: u64,
+    /// Wall pulsation (absent: the tissue is static unless the scene has `bulk` motion), see
+    /// [`crate::motion`].
+    pub pulsation: Option<Pulsation>,
 }
 
 impl Default for TissueParams {
@@ -59,6 +63,7 @@ impl Default for TissueParams {
             tissue_to_blood_db: 40.0,
             wall: Some(WallLayer::default()),
             seed: 2,
+            pulsation: None,
         }
     }
 }
@@ -99,6 +104,9 @@ impl TissueParams {
                 "0 ..= 40 dB".to_string(),
             )?;
         }
+        if let Some(p) = &self.pulsation {
+            p.validate()?;
+        }
         Ok(())
     }
 
@@ -117,7 +125,7 @@ impl TissueParams {
 
 /// Seeds the tissue: uniform in the region, outside the lumen of `geometry`, amplitudes N(0, σ²)
 /// with σ from [`TissueParams::sigma`] (× 10^(level/20) in the wall layer). Ids start at
-/// `first_id`; velocities are 0.
+/// `first_id`; velocities are 0. Positions are the rest positions (see [`rest_states`]).
 pub(crate) fn seed(
     t: &TissueParams,
     geometry: &Geometry,
@@ -153,4 +161,21 @@ pub(crate) fn seed(
         p.amplitude.push((if in_wall { a * wall_gain } else { a }) as f32);
     }
     Ok(p)
+}
+
+/// Rest state of every tissue scatterer for the wall pulsation: `[x₀, z₀, n_x·r, n_z·r]` with n
+/// the outward normal at the rest position and r = A·e^(−d/λ) its reach ([`Pulsation::reach`]),
+/// so that the scatterer sits at (x₀, z₀) + w(t)·(n_x·r, n_z·r). Zero reach without pulsation.
+pub(crate) fn rest_states(t: &TissueParams, geometry: &Geometry, tissue: &Particles) -> Vec<[f64; 4]> {
+    tissue
+        .x
+        .iter()
+        .zip(&tissue.z)
+        .map(|(&x, &z)| {
+            let (x, z) = (f64::from(x), f64::from(z));
+            let reach = t.pulsation.as_ref().map_or(0.0, |p| p.reach(geometry.outside_distance(x, z)));
+            let (nx, nz) = geometry.outward_normal(x, z);
+            [x, z, nx * reach, nz * reach]
+        })
+        .collect()
 }

@@ -71,7 +71,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let t0 = thread_cpu_ns();
         flow.advance_to(at.t)?;
-        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, flow.particles(), flow.tissue())?;
+        let moves = flow.tissue_moves();
+        publish_fluid(&mut out, at, params.schedule.packet_size, 0.0, flow.particles(), flow.tissue(), moves)?;
         let compute = thread_cpu_ns() - t0;
         kit.published((n * 32) as u64, at.frame_id, at.t, compute)?;
         last_t = at.t;
@@ -79,8 +80,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         let packet_done = at.frame_in_packet + 1 == params.schedule.packet_size;
         if let (true, Some(tout)) = (packet_done, truth_out.as_mut()) {
             let t0 = thread_cpu_ns();
-            let truth = flow.sample_truth(&grid);
             let t_mid = params.schedule.packet_mid_time(at.packet);
+            let truth = flow.sample_truth_at(&grid, t_mid)?;
             publish_truth(tout, &grid, &truth, at.packet, at.frame_id, t_mid)?;
             kit.stats.messages_out += 1;
             kit.record(at.frame_id, t_mid, thread_cpu_ns() - t0)?;

@@ -9,7 +9,8 @@ use sonoflow_node_kit::Output;
 
 /// Publishes the fluid particles `ps` of frame `at` (of a schedule with `packet_size` frames per
 /// packet; `dt` the solver step, 0 for an analytic flow) with their bounding box, followed by the
-/// stationary `tissue` scatterers (kind `PARTICLE_TISSUE`; `n_fluid` counts the fluid only).
+/// `tissue` scatterers (kind `PARTICLE_TISSUE_MOVING` if `tissue_moves`, else
+/// `PARTICLE_TISSUE`; `n_fluid` counts the fluid only).
 /// An error naming the topic if they do not fit its `max_elements`.
 pub fn publish_fluid(
     out: &mut Output<ParticleSnapshot>,
@@ -18,6 +19,7 @@ pub fn publish_fluid(
     dt: f64,
     ps: &Particles,
     tissue: &Particles,
+    tissue_moves: bool,
 ) -> anyhow::Result<()> {
     let n = ps.len() + tissue.len();
     if n > out.max_elements() {
@@ -40,7 +42,8 @@ pub fn publish_fluid(
     h.common.frame_id = at.frame_id;
     h.common.t_valid = at.t;
     out.publish_in_place(n, h, |dst| {
-        let all = [(ps, PARTICLE_FLUID), (tissue, PARTICLE_TISSUE)];
+        let tissue_kind = if tissue_moves { PARTICLE_TISSUE_MOVING } else { PARTICLE_TISSUE };
+        let all = [(ps, PARTICLE_FLUID), (tissue, tissue_kind)];
         let src = all.iter().flat_map(|(p, kind)| (0..p.len()).map(move |i| (*p, *kind, i)));
         for (d, (p, kind, i)) in dst.iter_mut().zip(src) {
             d.write(ParticleV1 {

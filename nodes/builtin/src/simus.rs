@@ -8,7 +8,8 @@
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    ParticleSnapshotHeaderV1, ParticleV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, PARTICLE_TISSUE, SAMPLE_RF_F32,
+    ParticleSnapshotHeaderV1, ParticleV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, PARTICLE_TISSUE, PARTICLE_TISSUE_MOVING,
+    SAMPLE_RF_F32,
 };
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
@@ -117,8 +118,9 @@ fn rf_header(
     rh
 }
 
-/// A snapshot's scatterers as SIMUS slices: the moving ones first (`..n_moving`), then the
-/// stationary tissue (`PARTICLE_TISSUE`), whose RF [`StaticEchoes`] computes once per plan.
+/// A snapshot's scatterers as SIMUS slices: the moving ones first (`..n_moving`: blood,
+/// platelets, moving tissue), then the stationary tissue (`PARTICLE_TISSUE`), whose RF
+/// [`StaticEchoes`] computes once per plan.
 #[derive(Default)]
 struct Scene {
     x: Vec<f32>,
@@ -144,7 +146,7 @@ impl Scene {
 }
 
 /// The receive-noise model, calibrated so that its SNR is against the blood: on the RF of the
-/// snapshot's non-tissue scatterers for transmit `tx`.
+/// snapshot's non-tissue scatterers (neither static nor moving tissue) for transmit `tx`.
 fn noise_model(
     np: &NoiseParams,
     scan: &Scan,
@@ -155,7 +157,8 @@ fn noise_model(
 ) -> anyhow::Result<NoiseModel> {
     let mut m = NoiseModel::new(np.clone(), scan.probe.fc, scan.probe.bandwidth, pl.fs).map_err(anyhow::Error::msg)?;
     let (mut x, mut z, mut rc) = (Vec::new(), Vec::new(), Vec::new());
-    for q in particles.iter().filter(|q| q.kind != PARTICLE_TISSUE) {
+    let blood = |q: &&ParticleV1| q.kind != PARTICLE_TISSUE && q.kind != PARTICLE_TISSUE_MOVING;
+    for q in particles.iter().filter(blood) {
         x.push(q.x);
         z.push(q.z);
         rc.push(q.amplitude);

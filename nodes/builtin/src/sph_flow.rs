@@ -133,7 +133,15 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 }
             }
             Event::Snapshot(s) => {
-                publish_fluid(&mut ports.particles, &s.at, s.packet_size, s.dt, &s.particles, &Default::default())?;
+                publish_fluid(
+                    &mut ports.particles,
+                    &s.at,
+                    s.packet_size,
+                    s.dt,
+                    &s.particles,
+                    &Default::default(),
+                    false,
+                )?;
                 kit.stats.messages_out += 1;
                 kit.stats.bytes_out += (s.particles.len() * 32) as u64;
                 kit.record(s.at.frame_id, s.at.t, solver_cpu + (thread_cpu_ns() - t0))?;
