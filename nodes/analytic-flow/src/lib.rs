@@ -48,7 +48,7 @@ pub use flow::FlowKind;
 pub use grid::{GridSpec, Truth};
 pub use motion::{BulkMotion, Pulsation, Rigid};
 pub use schedule::{AcquisitionTime, Schedule};
-pub use tissue::{TissueParams, WallLayer};
+pub use tissue::{LumenShape, Tissue, TissueParams, WallLayer};
 
 use flow::Geometry;
 use rand::{Rng, SeedableRng};
@@ -278,9 +278,7 @@ pub struct AnalyticFlow {
     local_b: Vec<f64>,
     particles: Particles,
     /// Tissue scatterers (empty without `tissue`).
-    tissue: Particles,
-    /// Their rest states for the wall pulsation (see `tissue::rest_states`).
-    tissue_rest: Vec<[f64; 4]>,
+    tissue: Tissue,
 }
 
 impl AnalyticFlow {
@@ -308,16 +306,13 @@ impl AnalyticFlow {
         }
         let t0 = params.schedule.t_start;
         let tissue = match &params.tissue {
-            Some(t) => tissue::seed(t, &geometry, params.density_per_mm2, params.amplitude_sigma, n)?,
-            None => Particles::default(),
+            Some(t) => Tissue::new(t, &geometry, params.density_per_mm2, params.amplitude_sigma, n)?,
+            None => Tissue::default(),
         };
-        let tissue_rest = match &params.tissue {
-            Some(t) => tissue::rest_states(t, &geometry, &tissue),
-            None => Vec::new(),
-        };
-        if u64::from(n) + tissue.len() as u64 > u64::from(params.max_particles) {
+        let n_tissue = tissue.particles().len() as u64;
+        if u64::from(n) + n_tissue > u64::from(params.max_particles) {
             return Err(ParamError::TooManyParticles {
-                expected: u64::from(n) + tissue.len() as u64,
+                expected: u64::from(n) + n_tissue,
                 max_particles: params.max_particles,
             });
         }
@@ -337,7 +332,6 @@ impl AnalyticFlow {
                 amplitude,
             },
             tissue,
-            tissue_rest,
         };
         flow.update_particles();
         Ok(flow)
@@ -345,14 +339,13 @@ impl AnalyticFlow {
 
     /// The tissue scatterers at the current time (ids after the blood's; empty without `tissue`).
     pub fn tissue(&self) -> &Particles {
-        &self.tissue
+        self.tissue.particles()
     }
 
     /// True when the tissue moves (a wall pulsation of non-zero amplitude, or bulk motion);
     /// false when it is static and its echoes can be computed once.
     pub fn tissue_moves(&self) -> bool {
-        let pulses = self.params.tissue.as_ref().and_then(|t| t.pulsation.as_ref()).is_some_and(|p| p.amplitude > 0.0);
-        pulses || self.params.bulk.is_some()
+        self.tissue.pulsates() || (self.params.bulk.is_some() && !self.tissue.particles().is_empty())
     }
 
     /// The bulk motion's transform at time `t` (the identity without `bulk`).
@@ -407,28 +400,7 @@ impl AnalyticFlow {
                     *vz = svz as f32;
                 }
             });
-        self.update_tissue(rigid);
-    }
-
-    /// Moves the tissue: rest position + w(t)·reach·n (pulsation), then the bulk motion.
-    fn update_tissue(&mut self, rigid: Option<Rigid>) {
-        if !self.tissue_moves() {
-            return;
-        }
-        let pulsation = self.params.tissue.as_ref().and_then(|t| t.pulsation.as_ref());
-        let (w, dw) = pulsation.map_or((0.0, 0.0), |p| p.waveform(self.t));
-        let p = &mut self.tissue;
-        for (i, &[x0, z0, px, pz]) in self.tissue_rest.iter().enumerate() {
-            let (x, z, vx, vz) = (x0 + w * px, z0 + w * pz, dw * px, dw * pz);
-            let [x, z, vx, vz] = match &rigid {
-                Some(r) => r.apply(x, z, vx, vz),
-                None => [x, z, vx, vz],
-            };
-            p.x[i] = x as f32;
-            p.z[i] = z as f32;
-            p.vx[i] = vx as f32;
-            p.vz[i] = vz as f32;
-        }
+        self.tissue.update(self.t, rigid.as_ref());
     }
 
     /// Current scatterers.

@@ -15,7 +15,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::flow::Geometry;
-use crate::motion::Pulsation;
+use crate::motion::{Pulsation, Rigid};
 use crate::{require, ParamError, Particles};
 
 /// The vessel wall: a brighter layer of tissue just outside the lumen.
@@ -123,59 +123,112 @@ impl TissueParams {
     }
 }
 
-/// Seeds the tissue: uniform in the region, outside the lumen of `geometry`, amplitudes N(0, σ²)
-/// with σ from [`TissueParams::sigma`] (× 10^(level/20) in the wall layer). Ids start at
-/// `first_id`; velocities are 0. Positions are the rest positions (see [`rest_states`]).
-pub(crate) fn seed(
-    t: &TissueParams,
-    geometry: &Geometry,
-    blood_density: f64,
-    blood_sigma: f64,
-    first_id: u32,
-) -> Result<Particles, ParamError> {
-    let sigma = t.sigma(blood_density, blood_sigma);
-    let wall_gain = t.wall.as_ref().map_or(1.0, |w| 10f64.powf(w.level_db / 20.0));
-    let bad = |e: rand_distr::NormalError| ParamError::OutOfRange {
-        field: "tissue.tissue_to_blood_db",
-        value: t.tissue_to_blood_db.to_string(),
-        allowed: e.to_string(),
-    };
-    let normal = Normal::new(0.0, sigma).map_err(bad)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
-    let n = t.region_count().round() as usize;
-    let [x0, x1, z0, z1] = t.region;
-    let mut p = Particles::default();
-    for _ in 0..n {
-        let x = x0 + (x1 - x0) * rng.gen::<f64>();
-        let z = z0 + (z1 - z0) * rng.gen::<f64>();
-        let a = normal.sample(&mut rng);
-        if geometry.velocity(x, z).is_some() {
-            continue; // the lumen: blood only
-        }
-        let in_wall = t.wall.as_ref().is_some_and(|w| geometry.outside_distance(x, z) <= w.thickness);
-        p.id.push(first_id + p.id.len() as u32);
-        p.x.push(x as f32);
-        p.z.push(z as f32);
-        p.vx.push(0.0);
-        p.vz.push(0.0);
-        p.amplitude.push((if in_wall { a * wall_gain } else { a }) as f32);
-    }
-    Ok(p)
+/// The lumen as tissue seeding and the wall pulsation need it. Implemented by the analytic
+/// flows' geometry and by the SPH vessels' signed distance (sonoflow-sph).
+pub trait LumenShape {
+    /// Distance (m) from a point outside the lumen to its wall (≤ 0 inside; +∞ where the wall
+    /// is not defined, e.g. beyond a straight vessel's ends: no wall layer, no pulsation there).
+    fn outside_distance(&self, x: f64, z: f64) -> f64;
+    /// Unit normal pointing away from the lumen at a point outside it ((0, 0) where undefined).
+    fn outward_normal(&self, x: f64, z: f64) -> (f64, f64);
 }
 
-/// Rest state of every tissue scatterer for the wall pulsation: `[x₀, z₀, n_x·r, n_z·r]` with n
-/// the outward normal at the rest position and r = A·e^(−d/λ) its reach ([`Pulsation::reach`]),
-/// so that the scatterer sits at (x₀, z₀) + w(t)·(n_x·r, n_z·r). Zero reach without pulsation.
-pub(crate) fn rest_states(t: &TissueParams, geometry: &Geometry, tissue: &Particles) -> Vec<[f64; 4]> {
-    tissue
-        .x
-        .iter()
-        .zip(&tissue.z)
-        .map(|(&x, &z)| {
-            let (x, z) = (f64::from(x), f64::from(z));
-            let reach = t.pulsation.as_ref().map_or(0.0, |p| p.reach(geometry.outside_distance(x, z)));
-            let (nx, nz) = geometry.outward_normal(x, z);
-            [x, z, nx * reach, nz * reach]
-        })
-        .collect()
+impl LumenShape for Geometry {
+    fn outside_distance(&self, x: f64, z: f64) -> f64 {
+        Geometry::outside_distance(self, x, z)
+    }
+    fn outward_normal(&self, x: f64, z: f64) -> (f64, f64) {
+        Geometry::outward_normal(self, x, z)
+    }
+}
+
+/// Tissue scatterers around a lumen and their motion.
+#[derive(Clone, Debug, Default)]
+pub struct Tissue {
+    pulsation: Option<Pulsation>,
+    particles: Particles,
+    /// `[x₀, z₀, n_x·r, n_z·r]` per scatterer: rest position, outward normal × reach
+    /// ([`Pulsation::reach`]) so that it sits at (x₀, z₀) + w(t)·(n_x·r, n_z·r).
+    rest: Vec<[f64; 4]>,
+}
+
+impl Tissue {
+    /// Seeds the tissue: uniform in the region, outside the lumen, amplitudes N(0, σ²) with σ
+    /// from [`TissueParams::sigma`] for blood of `blood_density` (per mm²) and amplitude σ
+    /// `blood_sigma` (× 10^(level/20) in the wall layer). Ids start at `first_id`; positions
+    /// are the rest positions, velocities 0 until [`update`](Self::update).
+    pub fn new(
+        t: &TissueParams,
+        lumen: &impl LumenShape,
+        blood_density: f64,
+        blood_sigma: f64,
+        first_id: u32,
+    ) -> Result<Self, ParamError> {
+        t.validate()?;
+        let sigma = t.sigma(blood_density, blood_sigma);
+        let wall_gain = t.wall.as_ref().map_or(1.0, |w| 10f64.powf(w.level_db / 20.0));
+        let bad = |e: rand_distr::NormalError| ParamError::OutOfRange {
+            field: "tissue.tissue_to_blood_db",
+            value: t.tissue_to_blood_db.to_string(),
+            allowed: e.to_string(),
+        };
+        let normal = Normal::new(0.0, sigma).map_err(bad)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+        let n = t.region_count().round() as usize;
+        let [x0, x1, z0, z1] = t.region;
+        let mut p = Particles::default();
+        let mut rest = Vec::new();
+        for _ in 0..n {
+            let x = x0 + (x1 - x0) * rng.gen::<f64>();
+            let z = z0 + (z1 - z0) * rng.gen::<f64>();
+            let a = normal.sample(&mut rng);
+            let d = lumen.outside_distance(x, z);
+            if d.is_nan() || d <= 0.0 {
+                continue; // the lumen: blood only
+            }
+            let in_wall = t.wall.as_ref().is_some_and(|w| d <= w.thickness);
+            p.id.push(first_id + p.id.len() as u32);
+            p.x.push(x as f32);
+            p.z.push(z as f32);
+            p.vx.push(0.0);
+            p.vz.push(0.0);
+            p.amplitude.push((if in_wall { a * wall_gain } else { a }) as f32);
+            let (x, z) = (f64::from(x as f32), f64::from(z as f32));
+            let reach = t.pulsation.as_ref().map_or(0.0, |pu| pu.reach(lumen.outside_distance(x, z)));
+            let (nx, nz) = lumen.outward_normal(x, z);
+            rest.push([x, z, nx * reach, nz * reach]);
+        }
+        Ok(Self { pulsation: t.pulsation.clone(), particles: p, rest })
+    }
+
+    /// The scatterers at the last [`update`](Self::update) (rest positions before).
+    pub fn particles(&self) -> &Particles {
+        &self.particles
+    }
+
+    /// True when the wall pulsates (non-zero amplitude).
+    pub fn pulsates(&self) -> bool {
+        self.pulsation.as_ref().is_some_and(|p| p.amplitude > 0.0) && !self.particles.is_empty()
+    }
+
+    /// Moves the tissue to time `t`: rest position + w(t)·reach·n (pulsation), then the bulk
+    /// motion `rigid`; velocities are the exact derivatives. Nothing to do for static tissue.
+    pub fn update(&mut self, t: f64, rigid: Option<&Rigid>) {
+        if !self.pulsates() && rigid.is_none() {
+            return;
+        }
+        let (w, dw) = self.pulsation.as_ref().map_or((0.0, 0.0), |p| p.waveform(t));
+        let p = &mut self.particles;
+        for (i, &[x0, z0, px, pz]) in self.rest.iter().enumerate() {
+            let (x, z, vx, vz) = (x0 + w * px, z0 + w * pz, dw * px, dw * pz);
+            let [x, z, vx, vz] = match rigid {
+                Some(r) => r.apply(x, z, vx, vz),
+                None => [x, z, vx, vz],
+            };
+            p.x[i] = x as f32;
+            p.z[i] = z as f32;
+            p.vx[i] = vx as f32;
+            p.vz[i] = vz as f32;
+        }
+    }
 }

@@ -139,11 +139,11 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                     s.packet_size,
                     s.dt,
                     &s.particles,
-                    &Default::default(),
-                    false,
+                    &s.tissue,
+                    s.tissue_moves,
                 )?;
                 kit.stats.messages_out += 1;
-                kit.stats.bytes_out += (s.particles.len() * 32) as u64;
+                kit.stats.bytes_out += ((s.particles.len() + s.tissue.len()) * 32) as u64;
                 kit.record(s.at.frame_id, s.at.t, solver_cpu + (thread_cpu_ns() - t0))?;
                 solver_cpu = 0;
                 ports.stats(&producer, s.at.frame_id, 0)?;

@@ -6,7 +6,7 @@
 //!   and on the diagnostics instants (every `stats_interval` of simulated time from the start),
 //!   where `stats` carries the progress;
 //! * [`Event::Snapshot`] at every frame time: the fluid particles (the acoustic scatterers) with
-//!   their amplitudes ([`amplitude`]);
+//!   their amplitudes ([`amplitude`]), and the tissue around the lumen (with `tissue`);
 //! * [`Event::Truth`] at every packet's mid time (when asked for and a `truth_grid` is given): the
 //!   SPH-interpolated velocity on the grid, zero outside the lumen.
 //!
@@ -20,7 +20,9 @@ use std::path::{Path, PathBuf};
 
 pub use sonoflow_analytic_flow::{AcquisitionTime, GridSpec, Particles as Scatterers, Schedule, Truth};
 
-use crate::geometry::VesselScene;
+use sonoflow_analytic_flow::{LumenShape, Tissue};
+
+use crate::geometry::{Lumen, VesselGeometry, VesselScene};
 use crate::{Checkpoint, CheckpointError, Diagnostics, ParticleKind, Real, Solver, SphError};
 
 /// Errors of [`Producer::new`] and [`Producer::next_event`].
@@ -71,6 +73,10 @@ pub struct Snapshot {
     /// The fluid particles in solver order: id (the solver's stable id, truncated to u32),
     /// position and velocity (f32), amplitude ([`amplitude`]).
     pub particles: Scatterers,
+    /// The tissue scatterers (empty without `tissue`; ids from [`TISSUE_FIRST_ID`]).
+    pub tissue: Scatterers,
+    /// True when the tissue moves (a wall pulsation).
+    pub tissue_moves: bool,
     /// Progress after the frame.
     pub progress: Progress,
 }
@@ -137,6 +143,40 @@ pub struct Producer {
     frames_done: usize,
     last_frame_t: Real,
     log: Vec<String>,
+    tissue: Tissue,
+}
+
+/// First id of the tissue scatterers of an SPH scene (2³¹: above the solver's particle ids).
+pub const TISSUE_FIRST_ID: u32 = 1 << 31;
+
+/// The lumen of an SPH vessel for tissue seeding: the signed distance to the wall of the lumen
+/// with its open ends extended straight by 1 m (so that the tissue continues beside a vessel
+/// that leaves the domain, instead of closing over its opening); the outward normal is the
+/// distance's gradient (central differences, 1 µm).
+pub struct SphLumen(Lumen);
+
+impl SphLumen {
+    /// The lumen of `geometry`.
+    pub fn new(geometry: &VesselGeometry) -> Self {
+        SphLumen(Lumen::new(geometry, &geometry.openings(), 1.0))
+    }
+}
+
+impl LumenShape for SphLumen {
+    fn outside_distance(&self, x: f64, z: f64) -> f64 {
+        self.0.signed_distance_with_reservoirs(x, z)
+    }
+    fn outward_normal(&self, x: f64, z: f64) -> (f64, f64) {
+        let h = 1e-6;
+        let gx = self.outside_distance(x + h, z) - self.outside_distance(x - h, z);
+        let gz = self.outside_distance(x, z + h) - self.outside_distance(x, z - h);
+        let n = gx.hypot(gz);
+        if n > 0.0 && n.is_finite() {
+            (gx / n, gz / n)
+        } else {
+            (0.0, 0.0)
+        }
+    }
 }
 
 impl Producer {
@@ -202,6 +242,22 @@ impl Producer {
         }
         events.sort_by(|a, b| a.0.total_cmp(&b.0));
         let t_end = p.run_until.unwrap_or(p.schedule.end_time()).max(t_start);
+        let tissue = match &p.tissue {
+            Some(t) => {
+                let blood_density = 1e-6 / (p.dx * p.dx);
+                let lumen = SphLumen::new(&prep.geometry);
+                let tissue = Tissue::new(t, &lumen, blood_density, f64::from(p.amplitude_sigma), TISSUE_FIRST_ID)
+                    .map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
+                log.push(format!(
+                    "tissue: {} scatterers outside the lumen, {} dB above the blood{}",
+                    tissue.particles().len(),
+                    t.tissue_to_blood_db,
+                    if tissue.pulsates() { ", pulsating wall" } else { ", static" }
+                ));
+                tissue
+            }
+            None => Tissue::default(),
+        };
         // progress in units of 0.1 ms of simulated time
         let total = (((t_end - t_start) * 1e4).ceil() as u64).max(1);
         Ok(Producer {
@@ -217,6 +273,7 @@ impl Producer {
             frames_done: 0,
             last_frame_t: t_start,
             log,
+            tissue,
         })
     }
 
@@ -266,7 +323,8 @@ impl Producer {
         }))
     }
 
-    fn snapshot(&self, at: AcquisitionTime) -> Snapshot {
+    fn snapshot(&mut self, at: AcquisitionTime) -> Snapshot {
+        self.tissue.update(at.t, None);
         let ps = &self.solver.particles;
         let idx: Vec<usize> = (0..ps.len()).filter(|&i| ps.kind[i] == ParticleKind::Fluid).collect();
         let (seed, sigma) = (self.params.seed, self.params.amplitude_sigma);
@@ -284,6 +342,8 @@ impl Producer {
             dt: self.solver.last_step().map_or(0.0, |r| r.dt),
             bbox: particles.bbox(),
             particles,
+            tissue: self.tissue.particles().clone(),
+            tissue_moves: self.tissue.pulsates(),
             progress: self.progress(),
         }
     }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Deserializer};
-use sonoflow_analytic_flow::{GridSpec, Schedule};
+use sonoflow_analytic_flow::{GridSpec, Schedule, TissueParams};
 
 use crate::geometry::{carotid_bifurcation, stenosis, straight_tube, BuildOptions, InitialVelocity, VesselGeometry};
 use crate::{ProfileKind, Real, SphParams, WaveformSpec};
@@ -143,6 +143,11 @@ pub struct ProducerParams {
     /// Ground-truth grid (SPH-interpolated velocity at each packet's mid time). Default none.
     #[serde(default)]
     pub truth_grid: Option<GridSpec>,
+    /// Tissue around the lumen (absent: blood only): seeded outside the vessel's lumen (its open
+    /// ends extended straight), optionally with a wall pulsation; the SPH lumen itself stays
+    /// rigid. See [`sonoflow_analytic_flow::tissue`] and [`super::SphLumen`].
+    #[serde(default)]
+    pub tissue: Option<TissueParams>,
     /// Start from this checkpoint (the node resolves it relative to the launch file's folder).
     #[serde(default)]
     pub checkpoint_in: Option<PathBuf>,
@@ -176,6 +181,7 @@ impl Default for ProducerParams {
             amplitude_sigma: default_sigma(),
             seed: 0,
             truth_grid: None,
+            tissue: None,
             checkpoint_in: None,
             checkpoint_out: None,
             run_until: None,
@@ -196,7 +202,7 @@ pub struct InvalidParams {
 }
 
 impl InvalidParams {
-    fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
+    pub(crate) fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
         InvalidParams { field: field.into(), message: message.into() }
     }
 }
@@ -238,6 +244,9 @@ impl ProducerParams {
             ));
         }
         p.schedule.validate().map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
+        if let Some(t) = &p.tissue {
+            t.validate().map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
+        }
         if let Some(g) = &p.truth_grid {
             g.validate().map_err(|e| {
                 InvalidParams::new(e.field().replacen("grid.", "truth_grid.", 1), format!("truth_grid: {e}"))
