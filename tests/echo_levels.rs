@@ -52,6 +52,7 @@ fn tissue_and_wall_levels_hold_on_beamformed_data() {
                 tissue_to_blood_db: set_db,
                 wall: Some(WallLayer { thickness: 1.5e-3, level_db: 10.0 }),
                 seed: 100 + seed,
+                pulsation: None,
             };
             let params = AnalyticFlowParams {
                 flow: FlowKind::Poiseuille {
