@@ -28,7 +28,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams, Smoothn, SmoothnError, SmoothnParams,
+    blood_from_power, wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams, Smoothn, SmoothnError,
+    SmoothnParams,
 };
 
 /// Which regulariser.
@@ -394,12 +395,8 @@ impl FieldRegulariser {
         }
         // Power mask: no blood where the power is far below the frame's 99th percentile.
         if let Some(pw) = power {
-            let mut sorted: Vec<f32> = pw.iter().copied().filter(|v| v.is_finite()).collect();
-            sorted.sort_by(f32::total_cmp);
-            let p99 = sorted.get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize).copied().unwrap_or(0.0);
-            let floor = f64::from(p99) * 10f64.powf(self.params.power_mask_db / 10.0);
-            for (w, p) in self.weights.iter_mut().zip(pw) {
-                if !(p.is_finite() && f64::from(*p) >= floor) {
+            for (w, blood) in self.weights.iter_mut().zip(blood_from_power(pw, self.params.power_mask_db)) {
+                if !blood {
                     *w = 0.0;
                 }
             }

@@ -106,7 +106,7 @@ mod smoothn;
 pub mod testkit;
 
 pub use crate::divfree::{
-    wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,
+    blood_from_power, wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,
 };
 pub use crate::field::{FieldError, FieldRegulariser, FieldReport, PlaneRole, RegulariserParams};
 pub use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};

@@ -113,3 +113,13 @@ pub fn wall_from_power(
     let floor = ref_level * 10f64.powf(p.threshold_db / 10.0);
     Ok(sm.iter().map(|v| *v < floor).collect())
 }
+
+/// The power mask of the regulariser: pixels whose power is at least `power_mask_db` (≤ 0) relative
+/// to the frame's 99th percentile (finite values only) count as blood; NaN and below: not.
+pub fn blood_from_power(power: &[f32], power_mask_db: f64) -> Vec<bool> {
+    let mut sorted: Vec<f32> = power.iter().copied().filter(|v| v.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let p99 = sorted.get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize).copied().unwrap_or(0.0);
+    let floor = f64::from(p99) * 10f64.powf(power_mask_db / 10.0);
+    power.iter().map(|p| p.is_finite() && f64::from(*p) >= floor).collect()
+}

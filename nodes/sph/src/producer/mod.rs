@@ -108,7 +108,7 @@ pub enum Event {
         stats: Option<Progress>,
     },
     /// A frame's particles.
-    Snapshot(Snapshot),
+    Snapshot(Box<Snapshot>),
     /// A packet's ground truth.
     Truth(TruthField),
 }
@@ -305,7 +305,7 @@ impl Producer {
                 let snapshot = self.snapshot(at);
                 self.last_frame_t = at.t;
                 self.frames_done += 1;
-                Event::Snapshot(snapshot)
+                Event::Snapshot(Box::new(snapshot))
             }
             Scheduled::Truth { packet, t, frame_id } => {
                 let Some(g) = self.grid.as_ref() else { return self.next_event() };
