@@ -146,6 +146,22 @@ pub struct Producer {
     tissue: Tissue,
 }
 
+/// Offset \[m\] of particle `id`'s scatterer from the particle for position seed `seed`: uniform
+/// in [−dx/2, dx/2)², fixed for the particle's life (SplitMix64 of (seed, id); platform-independent).
+/// The scatterer moves with its particle, so its velocity is the particle's: the error against
+/// the fluid's velocity at the scatterer's own position is at most |∇u|·dx/√2 (the SPH
+/// interpolation error is of the same order).
+pub fn scatterer_offset(seed: u64, id: u64, dx: Real) -> [Real; 2] {
+    let unit = |lane: u64| {
+        let mut z = seed ^ id.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ lane.wrapping_mul(0xD1B5_4A32_D192_ED03);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as Real / (1u64 << 53) as Real
+    };
+    [(unit(1) - 0.5) * dx, (unit(2) - 0.5) * dx]
+}
+
 /// First id of the tissue scatterers of an SPH scene (2³¹: above the solver's particle ids).
 pub const TISSUE_FIRST_ID: u32 = 1 << 31;
 
@@ -209,6 +225,12 @@ impl Producer {
                 if ck.header.params != prep.solver {
                     log.push(
                         "note: the checkpoint was written with other solver parameters; continuing with this run's"
+                            .into(),
+                    );
+                }
+                if p.position_seed.is_some() {
+                    log.push(
+                        "note: position_seed is ignored when resuming from a checkpoint (its particles are used)"
                             .into(),
                     );
                 }
@@ -328,10 +350,14 @@ impl Producer {
         let ps = &self.solver.particles;
         let idx: Vec<usize> = (0..ps.len()).filter(|&i| ps.kind[i] == ParticleKind::Fluid).collect();
         let (seed, sigma) = (self.params.seed, self.params.amplitude_sigma);
+        let offset = |i: usize| match self.params.position_seed {
+            Some(s) => scatterer_offset(s, ps.id[i], self.params.dx),
+            None => [0.0, 0.0],
+        };
         let particles = Scatterers {
             id: idx.iter().map(|&i| ps.id[i] as u32).collect(),
-            x: idx.iter().map(|&i| ps.x[i] as f32).collect(),
-            z: idx.iter().map(|&i| ps.z[i] as f32).collect(),
+            x: idx.iter().map(|&i| (ps.x[i] + offset(i)[0]) as f32).collect(),
+            z: idx.iter().map(|&i| (ps.z[i] + offset(i)[1]) as f32).collect(),
             vx: idx.iter().map(|&i| ps.vx[i] as f32).collect(),
             vz: idx.iter().map(|&i| ps.vz[i] as f32).collect(),
             amplitude: idx.iter().map(|&i| amplitude(seed, ps.id[i], sigma)).collect(),

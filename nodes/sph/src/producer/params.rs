@@ -140,6 +140,14 @@ pub struct ProducerParams {
     /// Seed of the amplitudes (with the particle id). Default 0.
     #[serde(default)]
     pub seed: u64,
+    /// Seed of the scatterer positions (absent: each scatterer sits on its fluid particle, as in
+    /// the paper). With a seed, each fluid particle's scatterer sits at a fixed offset from it,
+    /// uniform in [−dx/2, dx/2)² and drawn from (seed, particle id), carried with the particle
+    /// (its velocity): the speckle is a new realisation while the SPH solution is untouched (the
+    /// amplitude `seed` alone keeps the scatterers where the lattice puts them). See
+    /// [`super::scatterer_offset`].
+    #[serde(default)]
+    pub position_seed: Option<u64>,
     /// Ground-truth grid (SPH-interpolated velocity at each packet's mid time). Default none.
     #[serde(default)]
     pub truth_grid: Option<GridSpec>,
@@ -180,6 +188,7 @@ impl Default for ProducerParams {
             schedule: Schedule::default(),
             amplitude_sigma: default_sigma(),
             seed: 0,
+            position_seed: None,
             truth_grid: None,
             tissue: None,
             checkpoint_in: None,
