@@ -268,6 +268,48 @@ fn sweep_runs_each_point_and_reports_error_against_time() {
     assert!(!dir.path().join("bad").exists());
 }
 
+/// `sonoflow sweep --seeds`: every setting once per realisation, and the table over realisations
+/// holds the mean and sample standard deviation of the points' own figures; `--label` reads that
+/// evaluator's file (a missing one is reported per point, exit 1).
+#[test]
+fn sweep_over_seeds_reports_mean_and_spread() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(bin())
+        .args(["sweep"])
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
+        .args(["--seeds", "flow.seed=1,2,3", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
+    let x: Vec<f64> = csv.lines().skip(1).map(|r| r.split(',').nth(6).unwrap().parse().unwrap()).collect();
+    assert_eq!(x.len(), 3, "{csv}");
+    assert!(x[0] != x[1] && x[1] != x[2], "seeds move the scatterers: {x:?}");
+    let mean = x.iter().sum::<f64>() / 3.0;
+    let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 2.0).sqrt();
+    let seeds = std::fs::read_to_string(dir.path().join("sweep-seeds.csv")).unwrap();
+    let row: Vec<&str> = seeds.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[1], "3", "{seeds}");
+    let (m, s): (f64, f64) = (row[2].parse().unwrap(), row[3].parse().unwrap());
+    assert!((m - mean).abs() < 1e-12 && (s - sd).abs() < 1e-12, "{seeds}");
+    let md = std::fs::read_to_string(dir.path().join("sweep.md")).unwrap();
+    assert!(md.contains("Over 3 realisations"), "{md}");
+    let labelled = Command::new(bin())
+        .args(["sweep"])
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
+        .args(["--seeds", "flow.seed=1", "--label", "nope", "--out"])
+        .arg(dir.path().join("labelled"))
+        .output()
+        .unwrap();
+    assert_eq!(labelled.status.code(), Some(1));
+    let csv = std::fs::read_to_string(dir.path().join("labelled/sweep.csv")).unwrap();
+    assert!(csv.contains("evaluation-nope.json"), "{csv}");
+}
+
 /// `sonoflow platelet data` then `train` on a small data set: the weights load back as the
 /// networks and reproduce the report's test error; `five` writes its figures and tables.
 #[test]

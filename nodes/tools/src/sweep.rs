@@ -1,9 +1,13 @@
 //! `sonoflow sweep`: runs a scene over a grid of parameter settings and reports error against
 //! run time. Every combination of the `--vary node.param=a,b,c` lists is one run (its own output
 //! folder `point-NNN`, its own run id); the error comes from the scene's `evaluator`
-//! (`evaluation.json`), the cost from the run report (compute CPU summed over the stages, and
-//! wall time). Writes `sweep.csv` (all points), `sweep.md` (table, Pareto front marked) and
-//! `sweep.svg` (error against compute time, Pareto front joined).
+//! (`evaluation.json`, or `evaluation-<label>.json` with `--label`), the cost from the run
+//! report (compute CPU summed over the stages, and wall time). With `--seeds node.param=s1,s2,…`
+//! (repeatable; several keys go together, the k-th value of each in realisation k) every setting
+//! runs once per realisation and the sweep also reports mean ± sample standard deviation over
+//! them. Writes `sweep.csv` (all points), `sweep.md` (table, Pareto front marked; with seeds
+//! the table over realisations), `sweep-seeds.csv` (with seeds) and `sweep.svg` (error against
+//! compute time, Pareto front joined).
 
 use sonoflow_launcher::launch::{self, Overrides};
 use std::fmt::Write as _;
@@ -16,8 +20,17 @@ pub struct SweepArgs {
     pub file: PathBuf,
     /// `node.param=a,b,c`: values to try (TOML values; commas inside [ ] or { } or quotes do not
     /// split). Repeat for a grid over several parameters.
-    #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2,…", required = true)]
+    #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2,…")]
     pub vary: Vec<String>,
+    /// `node.param=s1,s2,…`: realisations (e.g. `flow.seed=1,2,3`); every setting runs once per
+    /// realisation and the sweep reports mean ± spread over them. Repeat to vary several seeds
+    /// together (same number of values; the k-th of each in realisation k).
+    #[arg(long = "seeds", value_name = "NODE.PARAM=S1,S2,…")]
+    pub seeds: Vec<String>,
+    /// Read the evaluator labelled so (`evaluation-<label>.json`, e.g. `subband-divfree`)
+    /// instead of the unlabelled one.
+    #[arg(long)]
+    pub label: Option<String>,
     /// Fixed `node.param=value` for every run.
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     pub set: Vec<String>,
@@ -73,6 +86,83 @@ pub struct Point {
     pub x_gain: f64,
     pub z_gain: f64,
     pub pareto: bool,
+    /// Index of the setting (the `--vary` combination) this point realises.
+    pub group: usize,
+}
+
+/// Mean ± sample standard deviation over the realisations of one setting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spread {
+    pub settings: Vec<String>,
+    /// Realisations that ran and were evaluated.
+    pub n: usize,
+    /// (mean, sample standard deviation) of x |e|75, z |e|75, the RMS vector error (fractions
+    /// of v_max) and the compute time (s); NaN standard deviation for a single realisation.
+    pub x_abs_p75: (f64, f64),
+    pub z_abs_p75: (f64, f64),
+    pub error_rms: (f64, f64),
+    pub compute_s: (f64, f64),
+}
+
+/// Mean and sample standard deviation (n − 1); (NaN, NaN) when empty, (x, NaN) for one value.
+pub fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let mean = v.iter().sum::<f64>() / n;
+    if v.len() < 2 {
+        return (mean, f64::NAN);
+    }
+    (mean, (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt())
+}
+
+/// Groups the evaluated points by setting (`group`) and summarises each over its realisations;
+/// `settings[g]` names group g.
+pub fn spreads(points: &[Point], settings: &[Vec<String>]) -> Vec<Spread> {
+    settings
+        .iter()
+        .enumerate()
+        .map(|(g, set)| {
+            let ok: Vec<&Point> =
+                points.iter().filter(|p| p.group == g && p.status == "ok" && p.error_rms.is_finite()).collect();
+            let col = |f: fn(&Point) -> f64| mean_sd(&ok.iter().map(|p| f(p)).collect::<Vec<f64>>());
+            Spread {
+                settings: set.clone(),
+                n: ok.len(),
+                x_abs_p75: col(|p| p.x_abs_p75),
+                z_abs_p75: col(|p| p.z_abs_p75),
+                error_rms: col(|p| p.error_rms),
+                compute_s: col(|p| p.compute_s),
+            }
+        })
+        .collect()
+}
+
+/// Parses the `--seeds` options into realisations (each a list of `key=value` settings).
+pub fn realisations(seeds: &[String]) -> anyhow::Result<Vec<Vec<String>>> {
+    let mut columns: Vec<Vec<String>> = Vec::new();
+    for v in seeds {
+        let Some((key, values)) = v.split_once('=') else {
+            anyhow::bail!("--seeds {v}: expected NODE.PARAM=S1,S2,…");
+        };
+        let vals = split_values(values);
+        if vals.iter().any(String::is_empty) {
+            anyhow::bail!("--seeds {v}: empty value in the list");
+        }
+        if let Some(first) = columns.first() {
+            if first.len() != vals.len() {
+                anyhow::bail!(
+                    "--seeds {v}: {} values, but the first --seeds has {}: keys given together need as many values",
+                    vals.len(),
+                    first.len()
+                );
+            }
+        }
+        columns.push(vals.into_iter().map(|x| format!("{key}={x}")).collect());
+    }
+    let n = columns.first().map_or(0, Vec::len);
+    Ok((0..n).map(|k| columns.iter().map(|c| c[k].clone()).collect()).collect())
 }
 
 fn read_json(p: &Path) -> anyhow::Result<serde_json::Value> {
@@ -184,12 +274,28 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
         }
         axes.push(vals.into_iter().map(|x| format!("{key}={x}")).collect());
     }
-    let mut combos: Vec<Vec<String>> = vec![Vec::new()];
-    for axis in &axes {
-        combos = combos.iter().flat_map(|c| axis.iter().map(move |x| [c.clone(), vec![x.clone()]].concat())).collect();
+    if a.vary.is_empty() && a.seeds.is_empty() {
+        anyhow::bail!("sweep: nothing to vary: give --vary NODE.PARAM=V1,V2,… and/or --seeds NODE.PARAM=S1,S2,…");
     }
+    let mut settings: Vec<Vec<String>> = vec![Vec::new()];
+    for axis in &axes {
+        settings =
+            settings.iter().flat_map(|c| axis.iter().map(move |x| [c.clone(), vec![x.clone()]].concat())).collect();
+    }
+    let reals = realisations(&a.seeds)?;
+    // (setting index, settings of the run)
+    let runs: Vec<(usize, Vec<String>)> = if reals.is_empty() {
+        settings.iter().cloned().enumerate().collect()
+    } else {
+        let mut runs = Vec::new();
+        for (g, c) in settings.iter().enumerate() {
+            runs.extend(reals.iter().map(|r| (g, [c.clone(), r.clone()].concat())));
+        }
+        runs
+    };
+    let combos: Vec<Vec<String>> = runs.iter().map(|(_, c)| c.clone()).collect();
     if combos.len() > 1000 {
-        anyhow::bail!("--vary: {} combinations; at most 1000", combos.len());
+        anyhow::bail!("--vary × --seeds: {} runs; at most 1000", combos.len());
     }
     // Check every combination before running any.
     let mut graphs = Vec::new();
@@ -240,6 +346,7 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
             x_gain: f64::NAN,
             z_gain: f64::NAN,
             pareto: false,
+            group: runs[k].0,
         };
         if let Ok(r) = read_json(&dir.join("report.json")) {
             p.wall_s = r["wall_s"].as_f64().unwrap_or(f64::NAN);
@@ -248,7 +355,11 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
                 .map(|ns| ns.iter().filter_map(|n| n["stats"]["compute_ns_total"].as_f64()).sum::<f64>() / 1e9)
                 .unwrap_or(f64::NAN);
         }
-        match read_json(&dir.join("evaluation.json")) {
+        let eval_file = match &a.label {
+            Some(l) => format!("evaluation-{l}.json"),
+            None => "evaluation.json".to_string(),
+        };
+        match read_json(&dir.join(&eval_file)) {
             Ok(e) => {
                 let fields: Vec<&serde_json::Value> = e["packets"]
                     .as_array()
@@ -323,6 +434,49 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
             if p.pareto { "★" } else { "" }
         );
     }
+    if !reals.is_empty() {
+        let sp = spreads(&points, &settings);
+        let pm = |(m, sd): (f64, f64)| format!("{:.2} ± {:.2} %", 100.0 * m, 100.0 * sd);
+        let _ = write!(
+            md,
+            "\n## Over {} realisations ({})\n\nMean ± sample standard deviation over the realisations of each setting (x, z |e|₇₅: mean over packets, % of v_max).\n\n| settings | n | x \\|e\\|₇₅ | z \\|e\\|₇₅ | error | compute CPU (s) |\n|---|---:|---:|---:|---:|---:|\n",
+            reals.len(),
+            a.seeds.join("; ")
+        );
+        let mut scsv = String::from("settings,n,x_abs_p75_mean,x_abs_p75_sd,z_abs_p75_mean,z_abs_p75_sd,error_rms_mean,error_rms_sd,compute_s_mean\n");
+        for s in &sp {
+            let name = if s.settings.is_empty() { "(as in the file)".to_string() } else { s.settings.join(", ") };
+            let _ = writeln!(
+                md,
+                "| {name} | {} | {} | {} | {} | {:.2} |",
+                s.n,
+                pm(s.x_abs_p75),
+                pm(s.z_abs_p75),
+                pm(s.error_rms),
+                s.compute_s.0
+            );
+            let _ = writeln!(
+                scsv,
+                "\"{}\",{},{},{},{},{},{},{},{}",
+                s.settings.join("; ").replace('"', "\"\""),
+                s.n,
+                s.x_abs_p75.0,
+                s.x_abs_p75.1,
+                s.z_abs_p75.0,
+                s.z_abs_p75.1,
+                s.error_rms.0,
+                s.error_rms.1,
+                s.compute_s.0
+            );
+            println!(
+                "sweep: {name}: x |e|75 {}, z |e|75 {} over {} realisation(s)",
+                pm(s.x_abs_p75),
+                pm(s.z_abs_p75),
+                s.n
+            );
+        }
+        sonoflow_fileio::write_atomic(&out.join("sweep-seeds.csv"), scsv.as_bytes())?;
+    }
     let _ = writeln!(md, "\n![error against run time](sweep.svg)");
     sonoflow_fileio::write_atomic(&out.join("sweep.md"), md.as_bytes())?;
     sonoflow_fileio::write_atomic(
@@ -358,7 +512,27 @@ mod tests {
             x_gain: 1.0,
             z_gain: 1.0,
             pareto: false,
+            group: 0,
         }
+    }
+
+    #[test]
+    fn realisations_zip_the_seed_keys_and_spreads_summarise_each_setting() {
+        let r = realisations(&["flow.seed=1,2,3".into(), "flow.position_seed=7,8,9".into()]).unwrap();
+        assert_eq!(r[1], ["flow.seed=2", "flow.position_seed=8"]);
+        assert!(realisations(&["a.b=1,2".into(), "c.d=1".into()]).unwrap_err().to_string().contains("as many"));
+        assert!(realisations(&["a.b".into()]).is_err());
+        assert_eq!(mean_sd(&[1.0, 2.0, 3.0, 4.0]), (2.5, (5.0f64 / 3.0).sqrt()));
+        assert!(mean_sd(&[2.0]).1.is_nan() && mean_sd(&[]).0.is_nan());
+        let mut pts = vec![pt(0, 1.0, 0.1), pt(1, 3.0, 0.3), pt(2, 2.0, 0.5), pt(3, 2.0, 0.9)];
+        pts[2].group = 1;
+        pts[3].group = 1;
+        pts[3].status = "failed (exit 1)".into();
+        let sp = spreads(&pts, &[vec!["a=1".into()], vec!["a=2".into()]]);
+        assert_eq!((sp[0].n, sp[1].n), (2, 1), "failed runs are left out");
+        assert!((sp[0].x_abs_p75.0 - 0.2).abs() < 1e-15 && (sp[0].x_abs_p75.1 - 0.02f64.sqrt()).abs() < 1e-15);
+        assert_eq!(sp[0].compute_s.0, 2.0);
+        assert_eq!(sp[1].error_rms.0, 0.5);
     }
 
     #[test]
