@@ -216,18 +216,24 @@ fn smoothn_tool_rejects_bad_input_with_clear_errors() {
     assert!(!out.exists());
 }
 
+/// `sonoflow sweep` of the quickstart cut to one packet of 8 frames, with `args`, into `out`.
+fn quick_sweep(args: &[&str], out: &std::path::Path) -> std::process::Output {
+    Command::new(bin())
+        .args(["sweep"])
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 /// `sonoflow sweep` runs every combination, and its table holds each run's own evaluation.
 #[test]
 fn sweep_runs_each_point_and_reports_error_against_time() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(bin())
-        .args(["sweep"])
-        .arg(common::root().join("launch/quickstart.toml"))
-        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
-        .args(["--vary", "flow.density_per_mm2=2,4", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = quick_sweep(&["--vary", "flow.density_per_mm2=2,4"], dir.path());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{err}");
     let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
@@ -274,14 +280,7 @@ fn sweep_runs_each_point_and_reports_error_against_time() {
 #[test]
 fn sweep_over_seeds_reports_mean_and_spread() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(bin())
-        .args(["sweep"])
-        .arg(common::root().join("launch/quickstart.toml"))
-        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
-        .args(["--seeds", "flow.seed=1,2,3", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = quick_sweep(&["--seeds", "flow.seed=1,2,3"], dir.path());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{err}");
     let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
@@ -297,14 +296,7 @@ fn sweep_over_seeds_reports_mean_and_spread() {
     assert!((m - mean).abs() < 1e-12 && (s - sd).abs() < 1e-12, "{seeds}");
     let md = std::fs::read_to_string(dir.path().join("sweep.md")).unwrap();
     assert!(md.contains("Over 3 realisations"), "{md}");
-    let labelled = Command::new(bin())
-        .args(["sweep"])
-        .arg(common::root().join("launch/quickstart.toml"))
-        .args(["--set", "flow.schedule.n_packets=1", "--set", "flow.schedule.packet_size=8"])
-        .args(["--seeds", "flow.seed=1", "--label", "nope", "--out"])
-        .arg(dir.path().join("labelled"))
-        .output()
-        .unwrap();
+    let labelled = quick_sweep(&["--seeds", "flow.seed=1", "--label", "nope"], &dir.path().join("labelled"));
     assert_eq!(labelled.status.code(), Some(1));
     let csv = std::fs::read_to_string(dir.path().join("labelled/sweep.csv")).unwrap();
     assert!(csv.contains("evaluation-nope.json"), "{csv}");

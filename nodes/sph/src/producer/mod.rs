@@ -354,10 +354,11 @@ impl Producer {
             Some(s) => scatterer_offset(s, ps.id[i], self.params.dx),
             None => [0.0, 0.0],
         };
+        let offsets: Vec<[Real; 2]> = idx.iter().map(|&i| offset(i)).collect();
         let particles = Scatterers {
             id: idx.iter().map(|&i| ps.id[i] as u32).collect(),
-            x: idx.iter().map(|&i| (ps.x[i] + offset(i)[0]) as f32).collect(),
-            z: idx.iter().map(|&i| (ps.z[i] + offset(i)[1]) as f32).collect(),
+            x: idx.iter().zip(&offsets).map(|(&i, o)| (ps.x[i] + o[0]) as f32).collect(),
+            z: idx.iter().zip(&offsets).map(|(&i, o)| (ps.z[i] + o[1]) as f32).collect(),
             vx: idx.iter().map(|&i| ps.vx[i] as f32).collect(),
             vz: idx.iter().map(|&i| ps.vz[i] as f32).collect(),
             amplitude: idx.iter().map(|&i| amplitude(seed, ps.id[i], sigma)).collect(),

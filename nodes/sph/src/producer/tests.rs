@@ -1,5 +1,19 @@
 use super::*;
 
+/// The straight tube at a 0.5 mm lattice, constant 0.05 m/s inflow, c = 1 m/s, no relaxation,
+/// with the keys of `extra` added (or replaced).
+fn tube(extra: serde_json::Value) -> serde_json::Value {
+    let mut v = serde_json::json!({
+        "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
+        "inflow": { "type": "constant", "value": 0.05 },
+        "solver": { "c": 1.0 },
+    });
+    if let (Some(o), Some(e)) = (v.as_object_mut(), extra.as_object()) {
+        o.extend(e.clone());
+    }
+    v
+}
+
 fn params(v: serde_json::Value) -> Result<Prepared, String> {
     let p: ProducerParams = serde_json::from_value(v).map_err(|e| e.to_string())?;
     p.prepare().map_err(|e| e.to_string())
@@ -98,14 +112,11 @@ integrator = "single-evaluation"
 /// stepping, frames, the truth between the middle frames), then stepping to `run_until`.
 #[test]
 fn events_follow_the_schedule_and_the_truth_sits_at_each_packets_mid_time() {
-    let prep = params(serde_json::json!({
-        "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
-        "inflow": { "type": "constant", "value": 0.05 },
-        "solver": { "c": 1.0 },
+    let prep = params(tube(serde_json::json!({
         "schedule": { "prf": 10000.0, "packet_size": 4, "n_packets": 2, "packet_interval": 0.002, "t_start": 0.001 },
         "truth_grid": { "nx": 9, "nz": 5, "x0": -0.004, "z0": 0.012, "dx": 1e-3, "dz": 4e-3 },
         "stats_interval": 5e-4, "run_until": 0.004, "seed": 3,
-    }))
+    })))
     .expect("valid");
     let mut producer = Producer::new(&prep, true).expect("built");
     assert!(producer.take_log()[0].contains("fluid"));
@@ -198,14 +209,11 @@ fn a_schedule_before_the_checkpoint_is_refused() {
 /// A·w(t)·e^(−d/λ) (d = |z − 20 mm| − 4 mm, computed here), away from the lumen.
 #[test]
 fn tissue_surrounds_the_sph_lumen_and_its_wall_pulsates() {
-    let prep = params(serde_json::json!({
-        "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
-        "inflow": { "type": "constant", "value": 0.05 },
-        "solver": { "c": 1.0 },
+    let prep = params(tube(serde_json::json!({
         "schedule": { "prf": 10000.0, "packet_size": 4, "n_packets": 2, "packet_interval": 0.1, "t_start": 0.0 },
         "tissue": { "region": [-0.03, 0.03, 0.01, 0.03], "density_per_mm2": 3.0,
                     "pulsation": { "amplitude": 0.4e-3, "period": 0.2, "decay_length": 2e-3 } },
-    }))
+    })))
     .expect("valid");
     let mut producer = Producer::new(&prep, false).expect("built");
     assert!(producer.take_log().iter().any(|l| l.contains("tissue") && l.contains("pulsating")));
@@ -256,12 +264,9 @@ fn tissue_surrounds_the_sph_lumen_and_its_wall_pulsates() {
 #[test]
 fn position_seeds_move_the_scatterers() {
     let run = |seed: Option<u64>| {
-        let mut v = serde_json::json!({
-            "geometry": "straight-tube", "dx": 0.5e-3, "relax_iterations": 0,
-            "inflow": { "type": "constant", "value": 0.05 },
-            "solver": { "c": 1.0 },
+        let mut v = tube(serde_json::json!({
             "schedule": { "prf": 10000.0, "packet_size": 2, "n_packets": 1, "t_start": 0.001 },
-        });
+        }));
         if let Some(s) = seed {
             v["position_seed"] = serde_json::json!(s);
         }
