@@ -91,8 +91,9 @@ fn the_lumen_is_found_after_the_clutter_filter() {
     let (lumen_raw, tissue_raw) = classification(&frames, &grid, outside);
     let mut filtered = frames.clone();
     let mut refs: Vec<&mut [C32]> = filtered.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let report =
-        ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None }.apply_frames(&mut refs).unwrap();
+    let report = ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: None }
+        .apply_frames(&mut refs)
+        .unwrap();
     let (lumen_svd, tissue_svd) = classification(&filtered, &grid, outside);
     eprintln!(
         "no filter: lumen {:.1} %, tissue {:.1} %; SVD (rank {}, {:.4} of the energy removed): lumen {:.1} %, tissue {:.1} %",

@@ -127,7 +127,8 @@ pub enum ClutterParams {
         init: IirInit,
     },
     /// SVD of the Casorati matrix: `rank = r` removes r components; without `rank`, adaptive
-    /// with `tissue_cutoff` (fraction of the PRF, default 0.05) and `max_rank`.
+    /// with `tissue_cutoff` (fraction of the PRF, default 0.05), `max_rank` and the optional
+    /// energy gap `gap_db` (see [`crate::svd`]).
     Svd {
         /// Fixed rank (absent: adaptive).
         rank: Option<usize>,
@@ -136,6 +137,9 @@ pub enum ClutterParams {
         tissue_cutoff: f64,
         /// Adaptive rank: upper bound (absent: ⌈frames/2⌉).
         max_rank: Option<usize>,
+        /// Adaptive rank: energy drop (dB) that ends the tissue subspace (absent: none).
+        #[serde(default)]
+        gap_db: Option<f64>,
     },
 }
 
@@ -182,12 +186,12 @@ impl ClutterParams {
     }
 
     fn svd(&self) -> Result<SvdFilter> {
-        let ClutterParams::Svd { rank, tissue_cutoff, max_rank } = *self else {
+        let ClutterParams::Svd { rank, tissue_cutoff, max_rank, gap_db } = *self else {
             return Err(invalid("clutter.type", "not svd", "svd"));
         };
         SvdFilter::new(match rank {
             Some(r) => SvdRank::Fixed(r),
-            None => SvdRank::Adaptive { tissue_cutoff, max_rank },
+            None => SvdRank::Adaptive { tissue_cutoff, max_rank, gap_db },
         })
     }
 

@@ -11,6 +11,16 @@
 //! singular-vector frequency criterion of Baranger et al. 2018 (IEEE TMI 37:1574), in its
 //! simplest form. The adaptive rank is at most `max_rank` (default ⌈frames/2⌉, and always below
 //! the packet size: the filter never removes everything).
+//!
+//! **Energy gap** (`gap_db`, optional). Slow blood (flow nearly across the beam) has slow
+//! singular vectors too, so the frequency rule alone also removes blood whenever the tissue is
+//! slow enough to leave room below the cut-off. Tissue echoes are tens of dB stronger than blood,
+//! so the tissue components stand above the blood's and the noise's in energy, separated by a
+//! drop: with `gap_db = g`, the rank from the frequency rule is cut back to just after the
+//! *last* drop of at least g dB between consecutive singular values σ_k² / σ_{k+1}² among the
+//! components it would remove (the drop to the first component kept counts). Where there is no
+//! such drop (no tissue above the blood, or tissue whose spectrum falls off smoothly), the rank
+//! is 0 — nothing stands out as tissue, nothing is removed.
 
 use faer::{Mat, Side};
 use num_complex::Complex;
@@ -31,7 +41,23 @@ pub enum SvdRank {
         tissue_cutoff: f64,
         /// Upper bound of the rank (absent: ⌈frames/2⌉).
         max_rank: Option<usize>,
+        /// Energy gap (dB, > 0) that ends the tissue subspace (absent: frequency rule alone).
+        gap_db: Option<f64>,
     },
+}
+
+/// The rank ≤ `slow` just after the last drop of at least `gap_db` between consecutive energies
+/// σ_k² / σ_{k+1}² (k < slow), or 0 without such a drop. A zero singular value after a nonzero
+/// one is an infinite drop; two zeros are none.
+fn last_gap(singular_values: &[f64], slow: usize, gap_db: f64) -> usize {
+    let ratio = 10f64.powf(gap_db / 10.0);
+    (0..slow.min(singular_values.len().saturating_sub(1)))
+        .rev()
+        .find(|&k| {
+            let (a, b) = (singular_values[k] * singular_values[k], singular_values[k + 1] * singular_values[k + 1]);
+            a > 0.0 && a >= ratio * b
+        })
+        .map_or(0, |k| k + 1)
 }
 
 /// What one packet's SVD filtering did.
@@ -58,7 +84,12 @@ impl SvdFilter {
     pub fn new(rank: SvdRank) -> Result<Self> {
         match rank {
             SvdRank::Fixed(0) => return Err(invalid("clutter.rank", 0, "≥ 1 (or absent: adaptive)")),
-            SvdRank::Adaptive { tissue_cutoff, max_rank } => {
+            SvdRank::Adaptive { tissue_cutoff, max_rank, gap_db } => {
+                if let Some(g) = gap_db {
+                    if !(g.is_finite() && g > 0.0 && g <= 100.0) {
+                        return Err(invalid("clutter.gap_db", g, "in (0, 100] dB"));
+                    }
+                }
                 if !(tissue_cutoff.is_finite() && tissue_cutoff > 0.0 && tissue_cutoff < 0.5) {
                     return Err(invalid("clutter.tissue_cutoff", tissue_cutoff, "a fraction of the PRF in (0, 0.5)"));
                 }
@@ -124,9 +155,13 @@ impl SvdFilter {
             .collect();
         let rank = match self.rank {
             SvdRank::Fixed(r) => r,
-            SvdRank::Adaptive { tissue_cutoff, max_rank } => {
+            SvdRank::Adaptive { tissue_cutoff, max_rank, gap_db } => {
                 let cap = max_rank.unwrap_or(n.div_ceil(2)).min(n - 1);
-                frequencies.iter().take(cap).take_while(|f| f.abs() <= tissue_cutoff).count()
+                let slow = frequencies.iter().take(cap).take_while(|f| f.abs() <= tissue_cutoff).count();
+                match gap_db {
+                    None => slow,
+                    Some(g) => last_gap(&singular_values, slow, g),
+                }
             }
         };
         let total: f64 = singular_values.iter().map(|v| v * v).sum();

@@ -92,7 +92,7 @@ fn svd_filter_removes_tissue_60_db_above_blood() {
         let (f_blood, p_blood) = frequency_and_power(&blood);
         let mut frames = frames_of(&mixed);
         let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-        let svd = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: None }).unwrap();
+        let svd = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: None, gap_db: None }).unwrap();
         let out = svd.apply_frames(&mut refs).unwrap();
         assert_eq!(out.rank, 2, "seed {seed}: frequencies {:?}", &out.frequencies[..4]);
         assert!(out.removed_energy > 0.999, "{}", out.removed_energy);
@@ -104,6 +104,96 @@ fn svd_filter_removes_tissue_60_db_above_blood() {
     }
 }
 
+/// Per-pixel slow-time signals.
+type Pixels = Vec<Vec<Complex<f64>>>;
+
+/// A deterministic uniform generator in [0, 1) (splitmix64).
+fn uniform(state: &mut u64) -> f64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Slow blood as real blood echoes are: per pixel six scatterers crossing the beam (Gaussian
+/// transit envelope, 1/e half-width 8 frames, centres anywhere from before to after the packet)
+/// at one Doppler frequency in `band` (flow nearly across the beam), unit mean power, plus white
+/// noise 20 dB below it; and tissue 60 dB above the blood, a still component and one at 0.002 PRF
+/// (a pulsating wall). Returns (tissue + blood + noise, blood + noise).
+fn slow_blood_under_tissue(n_pix: usize, n: usize, band: (f64, f64), seed: u64) -> (Pixels, Pixels) {
+    let mut s = seed;
+    let phasor = |s: &mut u64| Complex::from_polar(1.0, TAU * uniform(s));
+    let gauss = |s: &mut u64| {
+        let (u, v) = (uniform(s).max(1e-300), uniform(s));
+        Complex::from_polar((-u.ln()).sqrt(), TAU * v)
+    };
+    let mut blood: Vec<Vec<Complex<f64>>> = (0..n_pix)
+        .map(|_| {
+            let f = band.0 + (band.1 - band.0) * uniform(&mut s);
+            let mut x = vec![Complex::new(0.0, 0.0); n];
+            for _ in 0..6 {
+                let (centre, ph) = (-10.0 + 52.0 * uniform(&mut s), phasor(&mut s));
+                for (t, v) in x.iter_mut().enumerate() {
+                    let env = (-((t as f64 - centre) / 8.0).powi(2)).exp();
+                    *v += ph * env * Complex::from_polar(1.0, TAU * f * t as f64);
+                }
+            }
+            x
+        })
+        .collect();
+    let power = blood.iter().flatten().map(|v| v.norm_sqr()).sum::<f64>() / (n_pix * n) as f64;
+    for x in blood.iter_mut() {
+        for v in x.iter_mut() {
+            *v = *v / power.sqrt() + gauss(&mut s) * 0.1;
+        }
+    }
+    let mixed = blood
+        .iter()
+        .map(|b| {
+            let (a0, a1) = (gauss(&mut s) * 1000.0, gauss(&mut s) * 1000.0);
+            b.iter().enumerate().map(|(t, v)| v + a0 + a1 * Complex::from_polar(1.0, TAU * 0.002 * t as f64)).collect()
+        })
+        .collect();
+    (mixed, blood)
+}
+
+/// Slow blood (0.004 … 0.03 PRF, flow nearly across the beam) under slow tissue 60 dB above it:
+/// the frequency rule alone (cut-off 0.05 PRF) counts the blood's slow components as tissue and
+/// removes them; with the energy gap (`gap_db` = 10) the rank stops at the tissue's two
+/// components and most of the blood's echo stays. Blood alone: the gap rule removes nothing.
+#[test]
+fn svd_energy_gap_keeps_slow_blood() {
+    let (n_pix, n) = (2000, 32);
+    let rule = |gap_db| SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: None, gap_db }).unwrap();
+    for seed in [1u64, 2, 3] {
+        let (mixed, blood) = slow_blood_under_tissue(n_pix, n, (0.004, 0.03), seed);
+        let (_, p_blood) = frequency_and_power(&blood);
+        let mut kept = Vec::new();
+        for gap in [None, Some(10.0)] {
+            let mut frames = frames_of(&mixed);
+            let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+            let out = rule(gap).apply_frames(&mut refs).unwrap();
+            let (_, p) = frequency_and_power(&pixels_of(&frames));
+            let db = 10.0 * (p / p_blood).log10();
+            eprintln!("seed {seed}, gap {gap:?}: rank {}, blood power {db:+.2} dB", out.rank);
+            kept.push((out.rank, db));
+        }
+        assert!(kept[0].0 > 4, "seed {seed}: the frequency rule removes blood too: {kept:?}");
+        assert_eq!(kept[1].0, 2, "seed {seed}: the gap ends the tissue subspace: {kept:?}");
+        assert!(kept[1].1 > kept[0].1 + 6.0, "seed {seed}: the gap keeps ≥ 6 dB more blood: {kept:?}");
+        let mut frames = frames_of(&blood);
+        let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+        assert_eq!(rule(Some(10.0)).apply_frames(&mut refs).unwrap().rank, 0, "seed {seed}: blood alone");
+    }
+    for bad in [0.0, -3.0, f64::NAN, 200.0] {
+        let e = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: None, gap_db: Some(bad) })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("clutter.gap_db"), "{e}");
+    }
+}
+
 /// Degenerate packets get clear outcomes: two frames work (rank ≤ 1), a fixed rank that would
 /// remove the whole packet and non-finite samples are errors naming the field, an adaptive rank
 /// never removes everything, a packet of tissue only is left near zero, not NaN.
@@ -112,7 +202,7 @@ fn svd_filter_degenerate_packets() {
     let still: Vec<Vec<Complex<f64>>> = (0..50).map(|p| vec![Complex::new(1.0 + p as f64, 0.5); 2]).collect();
     let mut frames = frames_of(&still);
     let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let adaptive = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: Some(10) }).unwrap();
+    let adaptive = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.05, max_rank: Some(10), gap_db: None }).unwrap();
     let out = adaptive.apply_frames(&mut refs).unwrap();
     assert_eq!(out.rank, 1, "capped below the packet size");
     assert!(frames.iter().flatten().all(|v| v.re.is_finite() && v.norm() < 1e-3), "tissue only: ~0 left");
@@ -129,7 +219,8 @@ fn svd_filter_degenerate_packets() {
     let mut refs: Vec<&mut [C32]> = one.iter_mut().map(|f| f.as_mut_slice()).collect();
     assert!(adaptive.apply_frames(&mut refs).unwrap_err().to_string().contains("≥ 2 frames"));
     assert!(SvdFilter::new(SvdRank::Fixed(0)).is_err());
-    let e = SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.7, max_rank: None }).unwrap_err().to_string();
+    let e =
+        SvdFilter::new(SvdRank::Adaptive { tissue_cutoff: 0.7, max_rank: None, gap_db: None }).unwrap_err().to_string();
     assert!(e.contains("clutter.tissue_cutoff"), "{e}");
 }
 
@@ -138,7 +229,7 @@ fn svd_filter_degenerate_packets() {
 #[test]
 fn clutter_table_of_the_doppler_stage() {
     let p: PacketParams = serde_json::from_value(serde_json::json!({ "clutter": { "type": "svd" } })).unwrap();
-    assert_eq!(p.clutter, Some(ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None }));
+    assert_eq!(p.clutter, Some(ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: None }));
     p.validate().unwrap();
     let p: PacketParams =
         serde_json::from_value(serde_json::json!({ "clutter": { "type": "iir", "order": 4, "cutoff": 0.1 } })).unwrap();

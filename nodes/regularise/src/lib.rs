@@ -107,6 +107,7 @@ pub mod testkit;
 
 pub use crate::divfree::{
     blood_from_power, wall_from_power, DivFree, DivFreeError, DivFreeParams, DivFreeReport, NoSlipParams, Selection,
+    WallRule,
 };
 pub use crate::field::{FieldError, FieldRegulariser, FieldReport, PlaneRole, RegulariserParams};
 pub use crate::params::{Flavour, SmoothnError, SmoothnParams, WeightFunction};

@@ -5,7 +5,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sonoflow_regularise::{wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams};
+use sonoflow_regularise::{wall_from_power, DivFree, DivFreeError, DivFreeParams, NoSlipParams, WallRule};
 
 const NZ: usize = 40;
 const NX: usize = 60;
@@ -55,6 +55,37 @@ fn the_wall_lies_just_outside_the_lumen() {
         .unwrap()
         .iter()
         .all(|w| !w));
+}
+
+/// After a clutter filter: the left half of the channel lost 10 dB of its blood echo (flow across
+/// the beam), and residual tissue outside sits 25 dB below the right half's blood. The default rule
+/// (5 dB below the blood's median) puts the wall inside the weak half; `two-class` (halfway between
+/// the blood's and the rest's median, in dB) keeps the whole lumen and still marks the tissue
+/// from 1 mm beyond the true wall on.
+#[test]
+fn two_class_wall_survives_a_clutter_filtered_lumen() {
+    let power: Vec<f64> = (0..NZ * NX)
+        .map(|p| {
+            let level = if p % NX < NX / 2 { 0.1 } else { 1.0 };
+            level * blurred_layer((p / NX) as f64 * D - zc(), 0.3e-3) + 10f64.powf(-2.5)
+        })
+        .collect();
+    let blood: Vec<bool> = power.iter().map(|v| *v > 10f64.powf(-1.5) * 1.0).collect();
+    let inside = |p: usize| (((p / NX) as f64 * D - zc()).abs() - HALF) * 1e3;
+    let median = wall_from_power(&power, &blood, [NZ, NX], [D, D], &NoSlipParams::default()).unwrap();
+    let weak_inside = (0..NZ * NX).filter(|&p| p % NX < NX / 2 && inside(p) < -0.1 && median[p]).count();
+    assert!(weak_inside > 0, "the default rule is expected to cut into the weak half");
+    let ns = NoSlipParams { rule: WallRule::TwoClass, ..NoSlipParams::default() };
+    let wall = wall_from_power(&power, &blood, [NZ, NX], [D, D], &ns).unwrap();
+    for (p, &w) in wall.iter().enumerate() {
+        let out = inside(p);
+        if out < -0.1 {
+            assert!(!w, "pixel {p}: {out:.2} mm inside the lumen marked as wall");
+        }
+        if out > 1.0 {
+            assert!(w, "pixel {p}: {out:.2} mm outside the lumen not marked");
+        }
+    }
 }
 
 #[test]

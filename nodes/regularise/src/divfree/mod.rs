@@ -75,7 +75,7 @@ use crate::WeightFunction;
 mod select;
 mod wall;
 use select::{bracket_min, BlockCv};
-pub use wall::{blood_from_power, wall_from_power, NoSlipParams};
+pub use wall::{blood_from_power, wall_from_power, NoSlipParams, WallRule};
 
 /// Parameters of [`DivFree`]. Every field has a default; unknown fields are rejected.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -7,6 +7,13 @@
 //! below the median smoothed power of the blood pixels are outside the lumen. Only the pixels
 //! adjacent to the blood need to be right: far outside the data the prior only keeps the fit at
 //! rest.
+//!
+//! After a clutter filter the blood's power is no longer even across the lumen: where the flow
+//! runs nearly across the beams its Doppler frequencies are low and the filter removes part of
+//! its echo (10 dB and more on the clutter carotid), so a threshold a few dB below the blood's
+//! median puts the wall inside the lumen. `rule = "two-class"` then places the threshold halfway
+//! (in dB) between the blood's median and the median of the other pixels (residual tissue and
+//! noise), or at `threshold_db`, whichever is lower.
 
 use serde::{Deserialize, Serialize};
 
@@ -26,11 +33,24 @@ pub struct NoSlipParams {
     /// σ of the Gaussian that smooths the power first (m, > 0; default 0.4 mm, about a speckle
     /// grain).
     pub smoothing: f64,
+    /// How the threshold is set (module doc): `blood-median` (default) or `two-class`.
+    pub rule: WallRule,
+}
+
+/// Where the no-slip wall's power threshold lies (module doc).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WallRule {
+    /// `threshold_db` below the blood's median.
+    #[default]
+    BloodMedian,
+    /// Halfway (dB) between the blood's median and the other pixels' median, at most `threshold_db`.
+    TwoClass,
 }
 
 impl Default for NoSlipParams {
     fn default() -> Self {
-        Self { threshold_db: -5.0, weight: 3.0, smoothing: 0.4e-3 }
+        Self { threshold_db: -5.0, weight: 3.0, smoothing: 0.4e-3, rule: WallRule::BloodMedian }
     }
 }
 
@@ -110,7 +130,15 @@ pub fn wall_from_power(
         return Ok(vec![false; n]);
     }
     let ref_level = super::median(&mut level);
-    let floor = ref_level * 10f64.powf(p.threshold_db / 10.0);
+    let mut threshold_db = p.threshold_db;
+    if p.rule == WallRule::TwoClass {
+        let mut rest: Vec<f64> = (0..n).filter(|&i| !blood[i]).map(|i| sm[i]).collect();
+        if !rest.is_empty() && ref_level > 0.0 {
+            let bg = super::median(&mut rest).max(ref_level * 1e-10);
+            threshold_db = threshold_db.min(0.5 * 10.0 * (bg / ref_level).log10());
+        }
+    }
+    let floor = ref_level * 10f64.powf(threshold_db / 10.0);
     Ok(sm.iter().map(|v| *v < floor).collect())
 }
 
