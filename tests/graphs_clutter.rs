@@ -3,9 +3,9 @@
 //! pulsating tissue 40 dB above the blood with 20 dB receive noise, the paper's chain and
 //! sonoflow's branch side by side, each with the SVD clutter filter. The pulsating wall is on
 //! the wire as moving tissue; both evaluators report the filter; the regularised pooled |e|₇₅
-//! stay below twice what this scene gives today (seed 1, release and test builds alike:
-//! paper x 37.0 % / z 3.2 %, sonoflow x 12.4 % / z 2.1 %), and sonoflow's branch stays ahead of
-//! the paper's in x.
+//! stay below twice what this scene gives today (seed 1, SVD with its default 10 dB energy gap:
+//! paper x 17.4 % / z 1.7 %, sonoflow x 6.3 % / z 1.6 %; before the gap: 37.0 / 3.2 % and
+//! 12.4 / 2.1 %), and sonoflow's branch stays ahead of the paper's in x.
 
 mod common;
 use common::*;
@@ -45,7 +45,7 @@ fn clutter_quick_scene_keeps_its_accuracy_through_tissue_noise_and_the_svd_filte
         100.0 * sz
     );
     assert_eq!((pf.as_str(), sf.as_str()), ("svd", "svd"));
-    assert!(px < 2.0 * 0.370 && pz < 2.0 * 0.032, "paper chain: x {px}, z {pz}");
-    assert!(sx < 2.0 * 0.124 && sz < 2.0 * 0.021, "sonoflow's branch: x {sx}, z {sz}");
+    assert!(px < 2.0 * 0.174 && pz < 2.0 * 0.017, "paper chain: x {px}, z {pz}");
+    assert!(sx < 2.0 * 0.063 && sz < 2.0 * 0.016, "sonoflow's branch: x {sx}, z {sz}");
     assert!(sx < px, "sonoflow's branch ahead of the paper's in x: {sx} vs {px}");
 }

@@ -91,7 +91,7 @@ fn the_lumen_is_found_after_the_clutter_filter() {
     let (lumen_raw, tissue_raw) = classification(&frames, &grid, outside);
     let mut filtered = frames.clone();
     let mut refs: Vec<&mut [C32]> = filtered.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let report = ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: None }
+    let report = ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: 10.0 }
         .apply_frames(&mut refs)
         .unwrap();
     let (lumen_svd, tissue_svd) = classification(&filtered, &grid, outside);

@@ -335,7 +335,7 @@ fn doppler_tool_recovers_a_known_phase_rotation_and_matches_the_library() {
     assert_eq!(code, 0, "{stderr}");
     let mut frames: Vec<Vec<C32>> = (0..nf).map(|t| (0..nz * nx).map(|p| data[p * nf + t]).collect()).collect();
     let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let svd = ClutterParams::Svd { rank: Some(1), tissue_cutoff: 0.05, max_rank: None, gap_db: None };
+    let svd = ClutterParams::Svd { rank: Some(1), tissue_cutoff: 0.05, max_rank: None, gap_db: 0.0 };
     let report = svd.apply_frames(&mut refs).unwrap();
     let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
     let map = DopplerEstimator::new(DopplerParams::new(fc, c, prf), nx, nz, 1.0)

@@ -127,8 +127,8 @@ pub enum ClutterParams {
         init: IirInit,
     },
     /// SVD of the Casorati matrix: `rank = r` removes r components; without `rank`, adaptive
-    /// with `tissue_cutoff` (fraction of the PRF, default 0.05), `max_rank` and the optional
-    /// energy gap `gap_db` (see [`crate::svd`]).
+    /// with `tissue_cutoff` (fraction of the PRF, default 0.05), `max_rank` and the energy gap
+    /// `gap_db` (default 10 dB; 0 = the frequency rule alone; see [`crate::svd`]).
     Svd {
         /// Fixed rank (absent: adaptive).
         rank: Option<usize>,
@@ -137,14 +137,20 @@ pub enum ClutterParams {
         tissue_cutoff: f64,
         /// Adaptive rank: upper bound (absent: ⌈frames/2⌉).
         max_rank: Option<usize>,
-        /// Adaptive rank: energy drop (dB) that ends the tissue subspace (absent: none).
-        #[serde(default)]
-        gap_db: Option<f64>,
+        /// Adaptive rank: energy drop (dB, 0 ..= 100) that ends the tissue subspace; 0 = none.
+        #[serde(default = "default_gap_db")]
+        gap_db: f64,
     },
 }
 
 fn default_tissue_cutoff() -> f64 {
     0.05
+}
+
+/// 10 dB: on the clutter carotid the tissue's components stand 13–50 dB above the next, while
+/// the blood's decay by 2–6 dB from one to the next (docs/nodes.md, "Why `gap_db`").
+fn default_gap_db() -> f64 {
+    10.0
 }
 
 /// Ids of the clutter filters in wire headers and reports.
@@ -189,6 +195,10 @@ impl ClutterParams {
         let ClutterParams::Svd { rank, tissue_cutoff, max_rank, gap_db } = *self else {
             return Err(invalid("clutter.type", "not svd", "svd"));
         };
+        if !(gap_db.is_finite() && (0.0..=100.0).contains(&gap_db)) {
+            return Err(invalid("clutter.gap_db", gap_db, "in 0 ..= 100 dB (0: the frequency rule alone)"));
+        }
+        let gap_db = (gap_db > 0.0).then_some(gap_db);
         SvdFilter::new(match rank {
             Some(r) => SvdRank::Fixed(r),
             None => SvdRank::Adaptive { tissue_cutoff, max_rank, gap_db },

@@ -12,7 +12,7 @@
 //! simplest form. The adaptive rank is at most `max_rank` (default ⌈frames/2⌉, and always below
 //! the packet size: the filter never removes everything).
 //!
-//! **Energy gap** (`gap_db`, optional). Slow blood (flow nearly across the beam) has slow
+//! **Energy gap** (`gap_db`; the Doppler stage's `clutter` table sets 10 dB unless told 0). Slow blood (flow nearly across the beam) has slow
 //! singular vectors too, so the frequency rule alone also removes blood whenever the tissue is
 //! slow enough to leave room below the cut-off. Tissue echoes are tens of dB stronger than blood,
 //! so the tissue components stand above the blood's and the noise's in energy, separated by a

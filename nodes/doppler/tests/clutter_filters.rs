@@ -224,12 +224,12 @@ fn svd_filter_degenerate_packets() {
     assert!(e.contains("clutter.tissue_cutoff"), "{e}");
 }
 
-/// The Doppler stage's `clutter` table: the three types with defaults, errors naming the field,
-/// one filter only.
+/// The Doppler stage's `clutter` table: the three types with defaults (SVD: adaptive with the
+/// 10 dB energy gap; `gap_db = 0` turns the gap off), errors naming the field, one filter only.
 #[test]
 fn clutter_table_of_the_doppler_stage() {
     let p: PacketParams = serde_json::from_value(serde_json::json!({ "clutter": { "type": "svd" } })).unwrap();
-    assert_eq!(p.clutter, Some(ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: None }));
+    assert_eq!(p.clutter, Some(ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: 10.0 }));
     p.validate().unwrap();
     let p: PacketParams =
         serde_json::from_value(serde_json::json!({ "clutter": { "type": "iir", "order": 4, "cutoff": 0.1 } })).unwrap();
@@ -240,6 +240,17 @@ fn clutter_table_of_the_doppler_stage() {
         bad(serde_json::json!({ "clutter": { "type": "iir", "order": 4, "cutoff": 0.6 } })).contains("clutter.cutoff")
     );
     assert!(bad(serde_json::json!({ "clutter": { "type": "polynomial", "order": 9 } })).contains("clutter.order"));
+    for g in [-1.0, 101.0] {
+        assert!(bad(serde_json::json!({ "clutter": { "type": "svd", "gap_db": g } })).contains("clutter.gap_db"));
+    }
+    // gap_db = 0: the frequency rule alone (the slow blood of svd_energy_gap_keeps_slow_blood goes).
+    let (mixed, _) = slow_blood_under_tissue(500, 32, (0.004, 0.03), 9);
+    for (gap_db, want) in [(0.0, false), (10.0, true)] {
+        let c = ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db };
+        c.validate().unwrap();
+        let rank = filter(&c, &mut frames_of(&mixed)).order_or_rank;
+        assert_eq!(rank == 2, want, "gap_db {gap_db}: rank {rank}");
+    }
     assert!(bad(serde_json::json!({ "clutter_order": 1, "clutter": { "type": "svd" } })).contains("one clutter filter"));
     let e = serde_json::from_value::<PacketParams>(serde_json::json!({ "clutter": { "type": "svd", "rnak": 2 } }))
         .unwrap_err()

@@ -21,6 +21,9 @@
 //!   flow smoothly over them). With `no_slip`, pixels outside the lumen found from the power
 //!   ([`wall_from_power`]) become a zero-velocity prior. The S of the previous frame starts the
 //!   search of the next.
+//! * `no_slip` with smoothn (the paper's regulariser given sonoflow's lumen, for a fair
+//!   baseline): the same power mask (missing data) and wall (missing, and zero on output, as
+//!   outside a `mask` plane).
 //!
 //! [`FieldRegulariser`] keeps the smoothing workspace (and the divergence-free fitter) while the
 //! grid stays the same: no allocation per frame for smoothn.
@@ -82,10 +85,12 @@ pub struct RegulariserParams {
     /// Power mask of the divergence-free fit: pixels with `power` more than this many dB below the
     /// frame's 99th percentile are missing. In [−100, 0]; default −15.
     pub power_mask_db: f64,
-    /// No-slip wall of the divergence-free fit (absent: off; `no_slip = {}`: on with the
-    /// defaults): pixels whose smoothed power is `threshold_db` (−5) below the blood's median get
-    /// a zero-velocity prior of `weight` (3); `smoothing` (0.4 mm) is the σ of the power's
-    /// smoothing. Needs the `power` plane.
+    /// No-slip wall (absent: off; `no_slip = {}`: on with the defaults): pixels whose smoothed
+    /// power is `threshold_db` (−5) below the blood's median get a zero-velocity prior of
+    /// `weight` (3); `smoothing` (0.4 mm) is the σ of the power's smoothing. Needs the `power`
+    /// plane. With smoothn it is sonoflow's lumen for the paper's regulariser: pixels below the
+    /// power mask (`power_mask_db`) are missing (filled by the smoothing), pixels beyond the wall
+    /// are missing and zero on output, as outside a `mask` plane (`weight` is not used).
     pub no_slip: Option<NoSlipParams>,
 }
 
@@ -365,6 +370,32 @@ impl FieldRegulariser {
             let power = find(roles, PlaneRole::Power).map(plane_of);
             return self.divergence_free(shape, spacing, power, [ivx, ivz], mask, planes_out);
         }
+        // sonoflow's lumen for smoothn (`no_slip`): the divergence-free fit's power mask (missing
+        // data) and wall (missing data, zero on output).
+        let mut lumen: Option<Vec<f32>> = None;
+        if let Some(ns) = &self.params.no_slip {
+            let Some(pw) = find(roles, PlaneRole::Power).map(plane_of) else {
+                return Err(FieldError::NoSlipNeedsPower);
+            };
+            for (w, blood) in self.weights.iter_mut().zip(blood_from_power(pw, self.params.power_mask_db)) {
+                if !blood {
+                    *w = 0.0;
+                }
+            }
+            let pw64: Vec<f64> = pw.iter().map(|v| f64::from(*v)).collect();
+            let blood: Vec<bool> = self.weights.iter().map(|w| *w > 0.0).collect();
+            let wall = wall_from_power(&pw64, &blood, shape, spacing, ns)?;
+            let inside = |i: usize| !wall[i] && !mask.is_some_and(|m| m[i] <= 0.5);
+            for (i, w) in self.weights.iter_mut().enumerate() {
+                if !inside(i) {
+                    *w = 0.0;
+                }
+            }
+            if !self.weights.iter().any(|&w| w > 0.0) {
+                return Ok(nothing_measured(planes_out, [ivx, ivz], n));
+            }
+            lumen = Some((0..n).map(|i| if inside(i) { 1.0 } else { 0.0 }).collect());
+        }
         let ws = match &mut self.ws {
             Some(w) if w.shape() == shape => w,
             slot => slot.insert(Smoothn::new(&shape, 2)?),
@@ -375,7 +406,7 @@ impl FieldRegulariser {
         let all_one = self.weights.iter().all(|&w| w == 1.0);
         let report = ws.smooth(&self.data, (!all_one).then_some(&self.weights[..]), &sp, &mut self.out)?;
         let (vx, vz) = self.out.split_at(n);
-        write_velocity(planes_out, [ivx, ivz], mask, vx, vz);
+        write_velocity(planes_out, [ivx, ivz], lumen.as_deref().or(mask), vx, vz);
         Ok(FieldReport { s: report.s, outlier_fraction: report.outlier_fraction, converged: report.converged })
     }
 

@@ -165,7 +165,8 @@ fn divergence_free_method_uses_the_power_mask() {
 /// `no_slip`: beyond the channel's walls the power is 8 dB below the blood (within the −15 dB
 /// mask, so those pixels are data) and the Doppler over-reads there (0.2 m/s, as blurred
 /// near-wall Doppler does). With the no-slip wall those pixels become a zero-velocity prior
-/// and the lumen's error drops; without a power plane it is a clear error.
+/// and the lumen's error drops, for the divergence-free fit and for smoothn given the same lumen
+/// (zero beyond the wall on output); without a power plane it is a clear error.
 #[test]
 fn no_slip_wall_from_the_power_plane() {
     let (nx, nz) = (40usize, 40usize);
@@ -183,11 +184,12 @@ fn no_slip_wall_from_the_power_plane() {
             v[2 * n + i] = 10f32.powf(-0.8);
         }
     }
-    let err = |p: RegulariserParams| -> f64 {
-        let (_, out) = process(p, [nz, nx], &[Vx, Vz, Power], &v).unwrap();
+    let err_of = |p: RegulariserParams, v: &[f32]| -> f64 {
+        let (_, out) = process(p, [nz, nx], &[Vx, Vz, Power], v).unwrap();
         let inside: Vec<usize> = (0..n).filter(|&i| v[2 * n + i] == 1.0).collect();
         (inside.iter().map(|&i| (out[i] as f64 - truth[i]).powi(2)).sum::<f64>() / inside.len() as f64).sqrt()
     };
+    let err = |p: RegulariserParams| err_of(p, &v);
     let df = RegulariserParams {
         method: Method::DivergenceFree,
         divergence_free: DivFreeParams { robust: false, s: Some(1.0), ..Default::default() },
@@ -196,6 +198,34 @@ fn no_slip_wall_from_the_power_plane() {
     let e_plain = err(df.clone());
     let e_wall = err(RegulariserParams { no_slip: Some(NoSlipParams::default()), ..df.clone() });
     assert!(e_wall < 0.5 * e_plain, "RMS error in the lumen: {e_wall} with the wall, {e_plain} without");
+    // The paper's smoothn given the same lumen: power-masked pixels missing, pixels beyond the
+    // wall missing and zero on output, the lumen fitted as without (a noisy channel flow, vz = 0).
+    let mut channel = v.clone();
+    channel[n..2 * n].fill(0.0);
+    let mut state = 7u64;
+    for i in 0..n {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        channel[i] += 0.05 * (((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5) as f32;
+        if i / nx < 2 || i / nx >= nz - 2 {
+            channel[2 * n + i] = 1e-3; // far outside: below the −15 dB power mask
+        }
+    }
+    let sm = RegulariserParams { smoothn: SmoothnParams { robust: true, ..Default::default() }, ..Default::default() };
+    let with_lumen = RegulariserParams { no_slip: Some(NoSlipParams::default()), ..sm.clone() };
+    let (e_sm, e_sm_wall) = (err_of(sm.clone(), &channel), err_of(with_lumen.clone(), &channel));
+    eprintln!("smoothn: RMS error in the lumen {e_sm_wall} with sonoflow's lumen, {e_sm} without");
+    assert!(e_sm_wall < 0.9 * e_sm, "smoothn: {e_sm_wall} with the lumen, {e_sm} without");
+    let (_, plain) = process(sm.clone(), [nz, nx], &[Vx, Vz, Power], &channel).unwrap();
+    let (_, out) = process(with_lumen, [nz, nx], &[Vx, Vz, Power], &channel).unwrap();
+    let row = |r: usize| (0..nx).map(move |c| r * nx + c);
+    // rows 2 and 37: data (−8 dB) but beyond the wall; rows 0 and 39: power-masked, also beyond
+    for i in row(0).chain(row(2)).chain(row(37)).chain(row(39)) {
+        assert!(out[i] == 0.0 && out[n + i] == 0.0, "pixel {i}: {} {}", out[i], out[n + i]);
+        assert!(plain[i] > 0.1, "pixel {i} without the lumen: {}", plain[i]);
+    }
+    let e =
+        process(RegulariserParams { no_slip: Some(NoSlipParams::default()), ..sm }, [nz, nx], &[Vx, Vz], &v[..2 * n]);
+    assert!(e.unwrap_err().to_string().contains("no_slip"));
     // no power plane: a clear error
     let p = RegulariserParams { no_slip: Some(NoSlipParams::default()), ..df };
     let e = process(p, [nz, nx], &[Vx, Vz, Other], &v).unwrap_err().to_string();

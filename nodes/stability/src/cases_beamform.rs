@@ -518,7 +518,7 @@ fn clutter_order(_: &Ctx) -> CaseResult {
 }
 
 fn svd_adaptive() -> ClutterParams {
-    ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: None }
+    ClutterParams::Svd { rank: None, tissue_cutoff: 0.05, max_rank: None, gap_db: 10.0 }
 }
 
 fn clutter_80_db(_: &Ctx) -> CaseResult {
@@ -603,6 +603,6 @@ fn svd_rank_all(_: &Ctx) -> CaseResult {
     let (mixed, _) = tissue_and_blood(100, 16, 40.0, &[0.0], (0.2, 0.2), 10);
     let mut frames = frames_of(&mixed);
     let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let c = ClutterParams::Svd { rank: Some(16), tissue_cutoff: 0.05, max_rank: None, gap_db: None };
+    let c = ClutterParams::Svd { rank: Some(16), tissue_cutoff: 0.05, max_rank: None, gap_db: 0.0 };
     c.apply_frames(&mut refs).map(|r| Check::new(true, format!("accepted rank {}", r.order_or_rank))).msg()
 }
