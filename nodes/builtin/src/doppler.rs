@@ -161,6 +161,31 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         None => kit.handshake(&mut [&mut input, &mut vout])?,
     }
     let mut publish = |kit: &mut Kit, r: PacketProducts, compute: u64| -> anyhow::Result<()> {
+        if !r.rejected_looks.is_empty() {
+            let typical = {
+                let mut m: Vec<f64> = r.look_residuals.iter().copied().filter(|v| v.is_finite()).collect();
+                m.sort_by(f64::total_cmp);
+                m.get(m.len() / 2).copied().unwrap_or(f64::NAN)
+            };
+            let which: Vec<String> = r
+                .rejected_looks
+                .iter()
+                .map(|&i| {
+                    let h = &r.looks[i].header;
+                    format!(
+                        "rx {:+.2}° at {:.2} MHz (median residual {:.3} m/s)",
+                        h.rx_angle.to_degrees(),
+                        h.fc / 1e6,
+                        r.look_residuals[i]
+                    )
+                })
+                .collect();
+            eprintln!(
+                "doppler: packet {}: left out of the vector solve (look_rejection): {}; the looks' median {typical:.3} m/s",
+                r.packet,
+                which.join(", ")
+            );
+        }
         let (maps, (mut vh, planes)) = packet_messages(r);
         if let Some(m) = mout.as_mut() {
             for (mut h, planes) in maps {

@@ -36,4 +36,6 @@ pub use packet::{mean_power, LookHeader, LookMap, PacketAssembler, PacketParams,
 pub use sonoflow_beamform::error::{BeamformError, Result};
 pub use sonoflow_beamform::{Grid, C32};
 pub use svd::{SvdFilter, SvdOutcome, SvdRank};
-pub use vector::{nominal_projection, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput};
+pub use vector::{
+    nominal_projection, outlier_looks, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput,
+};

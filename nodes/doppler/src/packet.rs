@@ -17,7 +17,7 @@ use sonoflow_beamform::{BeamformError, Grid, C32};
 use crate::aperture::{aperture_projection, Aperture};
 use crate::clutter::{ClutterParams, ClutterReport};
 use crate::estimator::{DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
-use crate::vector::{nominal_projection, solve_vector_weighted, Projection, VectorField, VectorInput};
+use crate::vector::{nominal_projection, outlier_looks, solve_vector_weighted, Projection, VectorField, VectorInput};
 
 /// Which projection vectors the vector solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -53,6 +53,11 @@ pub struct PacketParams {
     pub clutter: Option<ClutterParams>,
     /// `aperture` (per-pixel, from the images' receive aperture) or `nominal`.
     pub projection: ProjectionMode,
+    /// Look rejection of the vector solve (≥ 4 looks, [`crate::vector::outlier_looks`]): a look
+    /// whose median residual over the blood pixels (power within 15 dB of the 99th percentile)
+    /// against the field of the other looks exceeds this many times theirs is left out and the
+    /// field solved again; 0 = off. Default 4; > 1 otherwise.
+    pub look_rejection: f64,
 }
 
 impl Default for PacketParams {
@@ -66,6 +71,7 @@ impl Default for PacketParams {
             clutter_order: None,
             clutter: None,
             projection: ProjectionMode::Aperture,
+            look_rejection: 4.0,
         }
     }
 }
@@ -98,6 +104,10 @@ impl PacketParams {
         }
         if let Some(c) = &self.clutter {
             c.validate()?;
+        }
+        let r = self.look_rejection;
+        if !(r == 0.0 || (r.is_finite() && r > 1.0 && r <= 1e3)) {
+            return Err(invalid("look_rejection", r, "0 (off) or in (1, 1000]"));
         }
         Ok(())
     }
@@ -184,6 +194,12 @@ pub struct PacketProducts {
     pub frame_id: u64,
     /// Time of validity of the last look.
     pub t_valid: f64,
+    /// Looks left out of the vector solve (indices into `looks`) and every look's median
+    /// residual (m/s) against the field solved from the other looks; empty without look
+    /// rejection.
+    pub rejected_looks: Vec<usize>,
+    /// See `rejected_looks`.
+    pub look_residuals: Vec<f64>,
 }
 
 /// One packet's frames of one look.
@@ -358,6 +374,23 @@ impl PacketAssembler {
         let look_power: Vec<&[f32]> = looks.iter().map(|l| l.power.as_slice()).collect();
         let one_band = looks.iter().all(|l| l.header.fc.to_bits() == first.fc.to_bits());
         let power = mean_power(&look_power, one_band);
+        let (mut rejected_looks, mut look_residuals) = (Vec::new(), Vec::new());
+        if self.params.look_rejection > 0.0 && inputs.len() >= 4 {
+            let mut sorted: Vec<f32> = power.iter().copied().filter(|v| v.is_finite()).collect();
+            sorted.sort_by(f32::total_cmp);
+            let p99 = sorted.get(((sorted.len() as f64 - 1.0) * 0.99).round() as usize).copied().unwrap_or(0.0);
+            let blood: Vec<bool> =
+                power.iter().map(|v| v.is_finite() && f64::from(*v) >= f64::from(p99) * 10f64.powf(-1.5)).collect();
+            let (reject, medians) = outlier_looks(&inputs, &weights, &blood, self.params.look_rejection)?;
+            look_residuals = medians;
+            rejected_looks = (0..reject.len()).filter(|&i| reject[i]).collect();
+            if !rejected_looks.is_empty() {
+                let keep: Vec<usize> = (0..reject.len()).filter(|&i| !reject[i]).collect();
+                let kept: Vec<VectorInput> = keep.iter().map(|&i| inputs[i]).collect();
+                let kept_w: Vec<f64> = keep.iter().map(|&i| weights[i]).collect();
+                solve_vector_weighted(&kept, &kept_w, &mut self.vec)?;
+            }
+        }
         Ok(Some(PacketProducts {
             looks,
             vector: self.vec.clone(),
@@ -366,6 +399,8 @@ impl PacketAssembler {
             packet: first.packet,
             frame_id,
             t_valid,
+            rejected_looks,
+            look_residuals,
         }))
     }
 

@@ -145,3 +145,105 @@ pub fn solve_vector_weighted(inputs: &[VectorInput<'_>], weights: &[f64], out: &
     }
     Ok(())
 }
+
+/// Median over the pixels in `pixels` (with an estimate in look `i` and in the field solved from
+/// the looks `set` without `i`) of look `i`'s residual |v_D − a·v| against that field (NaN: none).
+fn leave_one_out_median(
+    inputs: &[VectorInput<'_>],
+    weights: &[f64],
+    set: &[usize],
+    i: usize,
+    pixels: &[bool],
+    field: &mut VectorField,
+) -> Result<f64> {
+    let rest: Vec<VectorInput> = set.iter().filter(|&&j| j != i).map(|&j| inputs[j]).collect();
+    let rest_w: Vec<f64> = set.iter().filter(|&&j| j != i).map(|&j| weights[j]).collect();
+    solve_vector_weighted(&rest, &rest_w, field)?;
+    let inp = &inputs[i];
+    let nom = match inp.projection {
+        Projection::Nominal { tx_tilt, rx_angle } => nominal_projection(tx_tilt, rx_angle),
+        Projection::PerPixel(_) => [0.0, 0.0],
+    };
+    let mut r: Vec<f64> = (0..pixels.len())
+        .filter(|&p| {
+            pixels[p]
+                && inp.flags[p] & flags::NO_ESTIMATE == 0
+                && field.flags[p] & flags::NO_ESTIMATE == 0
+                && inp.velocity[p].is_finite()
+        })
+        .map(|p| {
+            let a = match inp.projection {
+                Projection::Nominal { .. } => nom,
+                Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
+            };
+            (f64::from(inp.velocity[p]) - a[0] * f64::from(field.vx[p]) - a[1] * f64::from(field.vz[p])).abs()
+        })
+        .collect();
+    if r.is_empty() {
+        return Ok(f64::NAN);
+    }
+    let mid = r.len() / 2;
+    Ok(*r.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
+/// Median of the finite values (NaN if none).
+fn finite_median(v: &[f64]) -> f64 {
+    let mut f: Vec<f64> = v.iter().copied().filter(|m| m.is_finite()).collect();
+    if f.is_empty() {
+        return f64::NAN;
+    }
+    let mid = f.len() / 2;
+    *f.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// The looks that disagree with the others (look rejection of the vector solve). A look's
+/// *residual* is the median over the pixels in `pixels` of |v_D − a·v| against the field solved
+/// (with `weights`) from the other looks of the current set. Each round takes the look with the
+/// largest residual and rejects it when that exceeds `factor` × the median residual of the
+/// remaining looks among themselves (recomputed without it: a failed look pulls every field it
+/// is part of toward itself and would inflate the yardstick); rounds go on while at least three
+/// looks remain to judge by. Fewer than four looks: none rejected. Returns one flag per input
+/// (true = leave it out) and the first round's residuals (m/s; NaN where a look has no usable
+/// pixel).
+pub fn outlier_looks(
+    inputs: &[VectorInput<'_>],
+    weights: &[f64],
+    pixels: &[bool],
+    factor: f64,
+) -> Result<(Vec<bool>, Vec<f64>)> {
+    if !(factor.is_finite() && factor > 1.0) {
+        return Err(invalid("look_rejection", factor, "> 1 (or 0: off)"));
+    }
+    check_len("look rejection weights", weights.len(), inputs.len())?;
+    let mut reject = vec![false; inputs.len()];
+    let Some(first) = inputs.first() else { return Ok((reject, Vec::new())) };
+    check_len("look rejection pixels", pixels.len(), first.velocity.len())?;
+    let mut field = VectorField::default();
+    let mut active: Vec<usize> = (0..inputs.len()).collect();
+    let residuals = |set: &[usize], field: &mut VectorField| -> Result<Vec<f64>> {
+        set.iter().map(|&i| leave_one_out_median(inputs, weights, set, i, pixels, field)).collect()
+    };
+    let mut first_round = Vec::new();
+    while active.len() >= 4 {
+        let meds = residuals(&active, &mut field)?;
+        if first_round.is_empty() {
+            first_round = meds.clone();
+        }
+        let Some(k) = (0..active.len()).filter(|&k| meds[k].is_finite()).max_by(|&a, &b| meds[a].total_cmp(&meds[b]))
+        else {
+            break;
+        };
+        let rest: Vec<usize> = active.iter().copied().filter(|&j| j != active[k]).collect();
+        let typical = finite_median(&residuals(&rest, &mut field)?);
+        // a NaN yardstick (no usable pixel in the rest) rejects nothing
+        if meds[k].partial_cmp(&(factor * typical)) != Some(std::cmp::Ordering::Greater) {
+            break;
+        }
+        reject[active[k]] = true;
+        active = rest;
+    }
+    if first_round.is_empty() {
+        first_round = vec![f64::NAN; inputs.len()];
+    }
+    Ok((reject, first_round))
+}
