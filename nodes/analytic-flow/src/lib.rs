@@ -46,7 +46,7 @@ pub mod tissue;
 
 pub use flow::FlowKind;
 pub use grid::{GridSpec, Truth};
-pub use motion::{BulkMotion, Pulsation, Rigid};
+pub use motion::{BulkMotion, Pulsation, PulsationWaveform, Rigid};
 pub use schedule::{AcquisitionTime, Schedule};
 pub use tissue::{LumenShape, Tissue, TissueParams, WallLayer};
 
@@ -173,6 +173,15 @@ impl AnalyticFlowParams {
         self.schedule.validate()?;
         if let Some(t) = &self.tissue {
             t.validate()?;
+            if t.pulsation.as_ref().is_some_and(|p| p.waveform == PulsationWaveform::Inflow) {
+                return Err(ParamError::OutOfRange {
+                    field: "tissue.pulsation.waveform",
+                    value: "\"inflow\"".into(),
+                    allowed:
+                        "\"raised-cosine\" (an analytic flow has no inflow waveform; \"inflow\" is for sph-flow scenes)"
+                            .into(),
+                });
+            }
         }
         if let Some(b) = &self.bulk {
             b.validate()?;

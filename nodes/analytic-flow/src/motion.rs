@@ -4,7 +4,9 @@
 //! - **Wall pulsation** (`tissue.pulsation`): a tissue scatterer at rest position p₀, a distance
 //!   d ≥ 0 outside the lumen boundary with outward normal n, is at
 //!   p₀ + A·w(t)·e^(−d/λ)·n with the cardiac waveform w(t) = ½(1 − cos 2π(t − t₀)/T) (0 at t₀,
-//!   1 at mid-cycle). The lumen and the blood stay rigid: the wall only moves outward from its
+//!   1 at mid-cycle), or, with `waveform = "inflow"` (SPH scenes), the scene's own inflow
+//!   waveform u(t) scaled to [0, 1] over its cycle: w(t) = (u(t − t₀) − u_min)/(u_max − u_min)
+//!   (the wall distends with the pulse). The lumen and the blood stay rigid: the wall only moves outward from its
 //!   rest position, so no tissue enters the lumen (documented in docs/nodes.md).
 //! - **Bulk motion** (`bulk`, top level): the whole scene (blood, lumen, tissue and the truth
 //!   field) turns by θ(t) = θ̂·s(t) about `center` and translates by a·s(t), with
@@ -29,13 +31,28 @@ pub struct Pulsation {
     pub period: f64,
     /// Decay length λ of the displacement away from the wall (m), in (0, 0.05]. Default 5 mm.
     pub decay_length: f64,
-    /// Time t₀ (s) of the rest position (start of the cycle), finite. Default 0.
+    /// Time t₀ (s) of the rest position (start of the cycle), finite. Default 0. With
+    /// `waveform = "inflow"`: the delay of the wall's motion behind the inflow.
     pub t0: f64,
+    /// `raised-cosine` (default: w(t) above, with `period`) or `inflow` (the scene's inflow
+    /// waveform scaled to [0, 1]; its period, not `period`; SPH scenes only).
+    pub waveform: PulsationWaveform,
+}
+
+/// Time course of the wall pulsation (module doc).
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum PulsationWaveform {
+    /// ½(1 − cos 2π(t − t₀)/T).
+    #[default]
+    RaisedCosine,
+    /// The scene's inflow waveform scaled to [0, 1] (SPH scenes).
+    Inflow,
 }
 
 impl Default for Pulsation {
     fn default() -> Self {
-        Self { amplitude: 0.3e-3, period: 1.0, decay_length: 5e-3, t0: 0.0 }
+        Self { amplitude: 0.3e-3, period: 1.0, decay_length: 5e-3, t0: 0.0, waveform: PulsationWaveform::RaisedCosine }
     }
 }
 
@@ -63,7 +80,8 @@ impl Pulsation {
         require("tissue.pulsation.t0", self.t0, self.t0.is_finite(), "finite (s)")
     }
 
-    /// The waveform w(t) = ½(1 − cos 2π(t − t₀)/T) and its derivative.
+    /// The raised-cosine waveform w(t) = ½(1 − cos 2π(t − t₀)/T) and its derivative (for
+    /// `waveform = "inflow"` the caller supplies w and dw/dt: [`crate::tissue::Tissue::place`]).
     pub fn waveform(&self, t: f64) -> (f64, f64) {
         let (sin, cos) = (TAU * (t - self.t0) / self.period).sin_cos();
         (0.5 * (1.0 - cos), 0.5 * TAU / self.period * sin)
@@ -207,7 +225,7 @@ mod tests {
 
     #[test]
     fn pulsation_waveform_is_a_raised_cosine_with_its_exact_derivative() {
-        let p = Pulsation { amplitude: 0.4e-3, period: 0.8, decay_length: 3e-3, t0: 0.1 };
+        let p = Pulsation { amplitude: 0.4e-3, period: 0.8, decay_length: 3e-3, t0: 0.1, ..Pulsation::default() };
         p.validate().unwrap();
         assert_eq!(p.waveform(0.1).0, 0.0);
         assert!((p.waveform(0.5).0 - 1.0).abs() < 1e-15);

@@ -544,14 +544,19 @@ fn tissue_fills_the_region_outside_the_lumen() {
 /// unchanged; the wire kind is "moving".
 #[test]
 fn wall_pulsation_follows_the_waveform() {
-    let pulse = Pulsation { amplitude: 0.4e-3, period: 0.5, decay_length: 2e-3, t0: 0.05 };
+    let pulse = Pulsation { amplitude: 0.4e-3, period: 0.5, decay_length: 2e-3, t0: 0.05, ..Pulsation::default() };
     let t = TissueParams {
         region: [-0.01, 0.012, 0.015, 0.035],
         density_per_mm2: 2.0,
         pulsation: Some(pulse.clone()),
         ..TissueParams::default()
     };
-    let p = AnalyticFlowParams { tissue: Some(t), ..pipe_params(10.0, 0.3) };
+    let p = AnalyticFlowParams { tissue: Some(t.clone()), ..pipe_params(10.0, 0.3) };
+    // An analytic flow has no inflow waveform for the wall to follow: a clear error.
+    let inflow = Pulsation { waveform: crate::PulsationWaveform::Inflow, ..pulse.clone() };
+    let bad = AnalyticFlowParams { tissue: Some(TissueParams { pulsation: Some(inflow), ..t }), ..p.clone() };
+    let e = AnalyticFlow::new(&bad).unwrap_err().to_string();
+    assert!(e.contains("tissue.pulsation.waveform") && e.contains("sph-flow"), "{e}");
     let mut flow = AnalyticFlow::new(&p).unwrap();
     let mut still = AnalyticFlow::new(&AnalyticFlowParams { tissue: None, ..p.clone() }).unwrap();
     assert!(flow.tissue_moves() && !still.tissue_moves());

@@ -214,10 +214,22 @@ impl Tissue {
     /// Moves the tissue to time `t`: rest position + w(t)·reach·n (pulsation), then the bulk
     /// motion `rigid`; velocities are the exact derivatives. Nothing to do for static tissue.
     pub fn update(&mut self, t: f64, rigid: Option<&Rigid>) {
+        let wd = self.pulsation.as_ref().map_or((0.0, 0.0), |p| p.waveform(t));
+        self.place(wd, rigid);
+    }
+
+    /// The pulsation's waveform kind (None: no pulsation).
+    pub fn waveform_kind(&self) -> Option<crate::motion::PulsationWaveform> {
+        self.pulsation.as_ref().map(|p| p.waveform)
+    }
+
+    /// Moves the tissue to the waveform value `w` with rate `dw` (1/s): rest position + w·reach·n,
+    /// then the bulk motion `rigid` (how a producer with its own waveform, e.g. the SPH inflow,
+    /// drives the wall).
+    pub fn place(&mut self, (w, dw): (f64, f64), rigid: Option<&Rigid>) {
         if !self.pulsates() && rigid.is_none() {
             return;
         }
-        let (w, dw) = self.pulsation.as_ref().map_or((0.0, 0.0), |p| p.waveform(t));
         let p = &mut self.particles;
         for (i, &[x0, z0, px, pz]) in self.rest.iter().enumerate() {
             let (x, z, vx, vz) = (x0 + w * px, z0 + w * pz, dw * px, dw * pz);

@@ -144,6 +144,9 @@ pub struct Producer {
     last_frame_t: Real,
     log: Vec<String>,
     tissue: Tissue,
+    /// With `tissue.pulsation.waveform = "inflow"`: the inflow waveform, the wall's delay t₀ and
+    /// the waveform's (min, max) over its cycle.
+    wall_waveform: Option<(crate::waveform::Waveform, Real, (Real, Real))>,
 }
 
 /// Offset \[m\] of particle `id`'s scatterer from the particle for position seed `seed`: uniform
@@ -280,6 +283,20 @@ impl Producer {
             }
             None => Tissue::default(),
         };
+        let wall_waveform = match p.tissue.as_ref().and_then(|t| t.pulsation.as_ref()) {
+            Some(pu) if pu.waveform == sonoflow_analytic_flow::PulsationWaveform::Inflow => {
+                let (lo, hi) = prep.build.inflow.range();
+                if !(hi > lo) {
+                    return Err(InvalidParams::new(
+                        "tissue.pulsation.waveform",
+                        "tissue.pulsation.waveform = \"inflow\" needs a pulsatile inflow (this one is constant): use \"raised-cosine\"",
+                    )
+                    .into());
+                }
+                Some((prep.build.inflow.clone(), pu.t0, (lo, hi)))
+            }
+            _ => None,
+        };
         // progress in units of 0.1 ms of simulated time
         let total = (((t_end - t_start) * 1e4).ceil() as u64).max(1);
         Ok(Producer {
@@ -296,6 +313,7 @@ impl Producer {
             last_frame_t: t_start,
             log,
             tissue,
+            wall_waveform,
         })
     }
 
@@ -346,7 +364,13 @@ impl Producer {
     }
 
     fn snapshot(&mut self, at: AcquisitionTime) -> Snapshot {
-        self.tissue.update(at.t, None);
+        match &self.wall_waveform {
+            Some((u, t0, (lo, hi))) => {
+                let s = at.t - t0;
+                self.tissue.place(((u.value(s) - lo) / (hi - lo), u.derivative(s) / (hi - lo)), None);
+            }
+            None => self.tissue.update(at.t, None),
+        }
         let ps = &self.solver.particles;
         let idx: Vec<usize> = (0..ps.len()).filter(|&i| ps.kind[i] == ParticleKind::Fluid).collect();
         let (seed, sigma) = (self.params.seed, self.params.amplitude_sigma);

@@ -257,6 +257,74 @@ fn tissue_surrounds_the_sph_lumen_and_its_wall_pulsates() {
     assert_eq!(frames, 8);
 }
 
+/// `pulsation.waveform = "inflow"`: the wall follows the scene's inflow waveform scaled to [0, 1]
+/// over its cycle, delayed by t₀ (here the carotid waveform, t₀ = 5 ms): each scatterer sits at
+/// its rest position + w(t)·A·e^(−d/λ) across the axis, and its velocity is the rate of that,
+/// checked against a central difference of the waveform (not its analytic derivative). A constant
+/// inflow has no pulse to follow: a clear error naming the field.
+#[test]
+fn the_wall_can_follow_the_inflow_waveform() {
+    let inflow = serde_json::json!({ "type": "carotid", "peak": 0.1, "mean": 0.05, "period": 0.83 });
+    let prep = params(tube(serde_json::json!({
+        "inflow": inflow.clone(),
+        "schedule": { "prf": 10000.0, "packet_size": 2, "n_packets": 3, "packet_interval": 0.015, "t_start": 0.0 },
+        "tissue": { "region": [-0.01, 0.01, 0.012, 0.028], "density_per_mm2": 1.0,
+                    "pulsation": { "amplitude": 0.4e-3, "decay_length": 2e-3, "t0": 0.005, "waveform": "inflow" } },
+    })))
+    .expect("valid");
+    let u: crate::waveform::WaveformSpec = serde_json::from_value(inflow).expect("spec");
+    let u = u.build().expect("waveform");
+    let (lo, hi) = u.range();
+    let w = |t: f64| (u.value(t - 0.005) - lo) / (hi - lo);
+    let mut producer = Producer::new(&prep, false).expect("built");
+    let (mut rest, mut frames) = (None, 0);
+    while let Some(ev) = producer.next_event().expect("runs") {
+        let Event::Snapshot(s) = ev else { continue };
+        frames += 1;
+        let ts = &s.tissue;
+        let t = s.at.t;
+        let r: &Scatterers = rest.get_or_insert_with(|| {
+            // undo the first frame's displacement to get the rest positions
+            let mut r = ts.clone();
+            for i in 0..r.len() {
+                let z = f64::from(ts.z[i]);
+                let side = (z - 0.02).signum();
+                // d from the displaced position: solve z = z0 + w A e^{-d/λ} side with d = |z0 − 20 mm| − 4 mm
+                let mut z0 = z;
+                for _ in 0..50 {
+                    let d = (z0 - 0.02).abs() - 4e-3;
+                    z0 = z - w(t) * 0.4e-3 * (-d / 2e-3).exp() * side;
+                }
+                r.z[i] = z0 as f32;
+            }
+            r
+        });
+        let rate = (w(t + 1e-6) - w(t - 1e-6)) / 2e-6;
+        for i in 0..ts.len() {
+            let z0 = f64::from(r.z[i]);
+            let d = (z0 - 0.02).abs() - 4e-3;
+            let reach = 0.4e-3 * (-d / 2e-3).exp() * (z0 - 0.02).signum();
+            let (z, vz) = (f64::from(ts.z[i]), f64::from(ts.vz[i]));
+            assert!((z - z0 - w(t) * reach).abs() < 2e-8, "scatterer {i} at t = {t}: z {z}, rest {z0}");
+            assert!(
+                (vz - rate * reach).abs() < 1e-6 * (1.0 + (rate * reach).abs()),
+                "scatterer {i} at t = {t}: vz {vz}"
+            );
+        }
+    }
+    assert_eq!(frames, 6);
+    let e = Producer::new(
+        &params(tube(serde_json::json!({
+            "tissue": { "region": [-0.01, 0.01, 0.012, 0.028], "pulsation": { "waveform": "inflow" } },
+        })))
+        .expect("valid"),
+        false,
+    )
+    .err()
+    .expect("refused");
+    assert!(e.to_string().contains("tissue.pulsation.waveform"), "{e}");
+}
+
 /// `position_seed` moves the scatterers (not only their amplitudes): each sits at its particle
 /// plus a fixed offset uniform in [−dx/2, dx/2)² (mean |offset| ≈ 0.38 dx); another seed gives
 /// other offsets, the same seed the same ones, the SPH solution is untouched, and the scatterer
