@@ -286,7 +286,7 @@ impl Producer {
         let wall_waveform = match p.tissue.as_ref().and_then(|t| t.pulsation.as_ref()) {
             Some(pu) if pu.waveform == sonoflow_analytic_flow::PulsationWaveform::Inflow => {
                 let (lo, hi) = prep.build.inflow.range();
-                if !(hi > lo) {
+                if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
                     return Err(InvalidParams::new(
                         "tissue.pulsation.waveform",
                         "tissue.pulsation.waveform = \"inflow\" needs a pulsatile inflow (this one is constant): use \"raised-cosine\"",
