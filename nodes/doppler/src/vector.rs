@@ -38,6 +38,25 @@ pub enum Projection<'a> {
     PerPixel(&'a [[f32; 2]]),
 }
 
+impl Projection<'_> {
+    /// The nominal vector of a `Nominal` geometry ([0, 0] for per-pixel ones: unused).
+    fn nominal(&self) -> [f64; 2] {
+        match *self {
+            Projection::Nominal { tx_tilt, rx_angle } => nominal_projection(tx_tilt, rx_angle),
+            Projection::PerPixel(_) => [0.0, 0.0],
+        }
+    }
+
+    /// The projection vector at pixel `p`; `nominal` is this geometry's nominal vector (computed
+    /// once per map by the caller).
+    fn at(&self, p: usize, nominal: [f64; 2]) -> [f64; 2] {
+        match self {
+            Projection::Nominal { .. } => nominal,
+            Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
+        }
+    }
+}
+
 /// One Doppler map entering the vector solve.
 #[derive(Clone, Copy, Debug)]
 pub struct VectorInput<'a> {
@@ -102,13 +121,7 @@ pub fn solve_vector_weighted(inputs: &[VectorInput<'_>], weights: &[f64], out: &
     out.vx.resize(n, 0.0);
     out.vz.resize(n, 0.0);
     out.flags.resize(n, 0);
-    let nominal: Vec<[f64; 2]> = inputs
-        .iter()
-        .map(|i| match i.projection {
-            Projection::Nominal { tx_tilt, rx_angle } => nominal_projection(tx_tilt, rx_angle),
-            Projection::PerPixel(_) => [0.0, 0.0],
-        })
-        .collect();
+    let nominal: Vec<[f64; 2]> = inputs.iter().map(|i| i.projection.nominal()).collect();
     for p in 0..n {
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
         let (mut used, mut fl) = (0usize, 0u8);
@@ -118,10 +131,7 @@ pub fn solve_vector_weighted(inputs: &[VectorInput<'_>], weights: &[f64], out: &
             if f & flags::NO_ESTIMATE != 0 || !v.is_finite() {
                 continue;
             }
-            let a = match inp.projection {
-                Projection::Nominal { .. } => *nom,
-                Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
-            };
+            let a = inp.projection.at(p, *nom);
             a11 += w * a[0] * a[0];
             a12 += w * a[0] * a[1];
             a22 += w * a[1] * a[1];
@@ -160,10 +170,7 @@ fn leave_one_out_median(
     let rest_w: Vec<f64> = set.iter().filter(|&&j| j != i).map(|&j| weights[j]).collect();
     solve_vector_weighted(&rest, &rest_w, field)?;
     let inp = &inputs[i];
-    let nom = match inp.projection {
-        Projection::Nominal { tx_tilt, rx_angle } => nominal_projection(tx_tilt, rx_angle),
-        Projection::PerPixel(_) => [0.0, 0.0],
-    };
+    let nom = inp.projection.nominal();
     let mut r: Vec<f64> = (0..pixels.len())
         .filter(|&p| {
             pixels[p]
@@ -172,10 +179,7 @@ fn leave_one_out_median(
                 && inp.velocity[p].is_finite()
         })
         .map(|p| {
-            let a = match inp.projection {
-                Projection::Nominal { .. } => nom,
-                Projection::PerPixel(a) => [f64::from(a[p][0]), f64::from(a[p][1])],
-            };
+            let a = inp.projection.at(p, nom);
             (f64::from(inp.velocity[p]) - a[0] * f64::from(field.vx[p]) - a[1] * f64::from(field.vz[p])).abs()
         })
         .collect();

@@ -373,18 +373,12 @@ impl FieldRegulariser {
         // sonoflow's lumen for smoothn (`no_slip`): the divergence-free fit's power mask (missing
         // data) and wall (missing data, zero on output).
         let mut lumen: Option<Vec<f32>> = None;
-        if let Some(ns) = &self.params.no_slip {
+        if let Some(ns) = self.params.no_slip.clone() {
             let Some(pw) = find(roles, PlaneRole::Power).map(plane_of) else {
                 return Err(FieldError::NoSlipNeedsPower);
             };
-            for (w, blood) in self.weights.iter_mut().zip(blood_from_power(pw, self.params.power_mask_db)) {
-                if !blood {
-                    *w = 0.0;
-                }
-            }
-            let pw64: Vec<f64> = pw.iter().map(|v| f64::from(*v)).collect();
-            let blood: Vec<bool> = self.weights.iter().map(|w| *w > 0.0).collect();
-            let wall = wall_from_power(&pw64, &blood, shape, spacing, ns)?;
+            self.power_mask(pw);
+            let wall = self.wall(pw, shape, spacing, &ns)?;
             let inside = |i: usize| !wall[i] && !mask.is_some_and(|m| m[i] <= 0.5);
             for (i, w) in self.weights.iter_mut().enumerate() {
                 if !inside(i) {
@@ -410,6 +404,30 @@ impl FieldRegulariser {
         Ok(FieldReport { s: report.s, outlier_fraction: report.outlier_fraction, converged: report.converged })
     }
 
+    /// The power mask: weight 0 where the power is more than `power_mask_db` below the frame's
+    /// 99th percentile (no blood there).
+    fn power_mask(&mut self, power: &[f32]) {
+        for (w, blood) in self.weights.iter_mut().zip(blood_from_power(power, self.params.power_mask_db)) {
+            if !blood {
+                *w = 0.0;
+            }
+        }
+    }
+
+    /// The no-slip wall from the power, the blood being the pixels with weight (after the
+    /// power mask).
+    fn wall(
+        &self,
+        power: &[f32],
+        shape: [usize; 2],
+        spacing: [f64; 2],
+        ns: &NoSlipParams,
+    ) -> Result<Vec<bool>, FieldError> {
+        let pw: Vec<f64> = power.iter().map(|v| f64::from(*v)).collect();
+        let blood: Vec<bool> = self.weights.iter().map(|w| *w > 0.0).collect();
+        Ok(wall_from_power(&pw, &blood, shape, spacing, ns)?)
+    }
+
     /// The divergence-free fit of one frame (weights already in `self.weights`).
     fn divergence_free(
         &mut self,
@@ -426,19 +444,13 @@ impl FieldRegulariser {
         }
         // Power mask: no blood where the power is far below the frame's 99th percentile.
         if let Some(pw) = power {
-            for (w, blood) in self.weights.iter_mut().zip(blood_from_power(pw, self.params.power_mask_db)) {
-                if !blood {
-                    *w = 0.0;
-                }
-            }
+            self.power_mask(pw);
         }
         // No-slip wall: outside the lumen the velocity is pulled to zero (not data).
         let mut prior = None;
         if let Some(ns) = &self.params.no_slip {
             let Some(pw) = power else { return Err(FieldError::NoSlipNeedsPower) };
-            let pw: Vec<f64> = pw.iter().map(|v| f64::from(*v)).collect();
-            let blood: Vec<bool> = self.weights.iter().map(|w| *w > 0.0).collect();
-            let wall = wall_from_power(&pw, &blood, [nz, nx], [dz, dx], ns)?;
+            let wall = self.wall(pw, [nz, nx], [dz, dx], ns)?;
             for (w, out) in self.weights.iter_mut().zip(&wall) {
                 if *out {
                     *w = 0.0;
