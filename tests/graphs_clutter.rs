@@ -10,8 +10,8 @@
 mod common;
 use common::*;
 use sonoflow_messages::cdr;
-use sonoflow_messages::types::ParticleSnapshot;
-use sonoflow_messages::{PARTICLE_FLUID, PARTICLE_TISSUE_MOVING};
+use sonoflow_messages::types::{ParticleSnapshot, VectorField};
+use sonoflow_messages::{CLUTTER_SVD, PARTICLE_FLUID, PARTICLE_TISSUE_MOVING, VECTOR_REGULARISED};
 
 fn pooled(dir: &std::path::Path, file: &str) -> (f64, f64, String) {
     let e: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(file)).unwrap()).unwrap();
@@ -45,6 +45,17 @@ fn clutter_quick_scene_keeps_its_accuracy_through_tissue_noise_and_the_svd_filte
         100.0 * sz
     );
     assert_eq!((pf.as_str(), sf.as_str()), ("svd", "svd"));
+    // The regularised field's header still says how it was made: the looks' SVD filter (rank
+    // and cut-off) and the ten looks of sonoflow's branch; the evaluator reads it from there.
+    let reg = read_topic(&dir.path().join("recording.mcap"), "regularised_sf");
+    let (vh, _) = cdr::decode::<VectorField>(&reg[0]).unwrap();
+    assert_eq!((vh.source, vh.clutter_filter, vh.n_looks), (VECTOR_REGULARISED, CLUTTER_SVD, 10));
+    assert!(vh.clutter_order >= 1 && vh.clutter_cutoff > 0.0 && vh.clutter_removed_energy > 0.9, "{vh:?}");
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("evaluation-subband-divfree.json")).unwrap())
+            .unwrap();
+    let fc = &e["field_clutter"]["regularised"];
+    assert_eq!((fc["filter"]["filter"].as_str(), fc["looks"].as_u64()), (Some("svd"), Some(10)), "{fc}");
     assert!(px < 2.0 * 0.174 && pz < 2.0 * 0.017, "paper chain: x {px}, z {pz}");
     assert!(sx < 2.0 * 0.063 && sz < 2.0 * 0.016, "sonoflow's branch: x {sx}, z {sz}");
     assert!(sx < px, "sonoflow's branch ahead of the paper's in x: {sx} vs {px}");
@@ -84,6 +95,11 @@ fn look_rejection_leaves_out_the_failed_look_of_a_clutter_realisation() {
             assert!(l.contains("rx -15.00° at 3.60 MHz"), "{l}");
         }
         let (sx, sz, _) = pooled(dir.path(), "evaluation-subband-divfree.json");
+        let e: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("evaluation-subband-divfree.json")).unwrap())
+                .unwrap();
+        let left_out = e["field_clutter"]["raw"]["rejected_looks"].as_u64();
+        assert_eq!(left_out, Some(u64::from(log_line)), "the raw field's header counts the look left out");
         eprintln!("look_rejection {rejection}: sonoflow x {:.1} % z {:.1} %", 100.0 * sx, 100.0 * sz);
         x.push((sx, sz));
     }

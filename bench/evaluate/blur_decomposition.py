@@ -25,9 +25,12 @@ MSG_HEADER = [
 GRID = [("x0", "<f8"), ("z0", "<f8"), ("dx", "<f8"), ("dz", "<f8"), ("nx", "<u4"), ("nz", "<u4")]
 VF = np.dtype([
     ("common", np.dtype(MSG_HEADER)), ("grid", np.dtype(GRID)), ("s", "<f8"), ("outl", "<f8"),
-    ("n_planes", "<u4"), ("source", "<u4"), ("packet", "<u4"), ("conv", "<u4"), ("plane_ids", "<u4", (8,)),
+    ("clutter_cutoff", "<f8"), ("clutter_removed_energy", "<f8"),
+    ("n_planes", "<u4"), ("source", "<u4"), ("packet", "<u4"), ("conv", "<u4"),
+    ("clutter_filter", "<u4"), ("clutter_order", "<u4"), ("n_looks", "<u4"), ("rejected_looks", "<u4"),
+    ("plane_ids", "<u4", (8,)),
 ])
-assert VF.itemsize == 168
+assert VF.itemsize == 200  # VectorFieldHeaderV2
 
 
 def decode(data):

@@ -24,7 +24,7 @@ pub enum MessageType {
     RfFrameV2,
     IqFrameV2,
     DopplerMapV2,
-    VectorFieldV1,
+    VectorFieldV2,
     StageStatsV1,
     FlowStatsV1,
 }
@@ -36,7 +36,7 @@ impl MessageType {
         MessageType::RfFrameV2,
         MessageType::IqFrameV2,
         MessageType::DopplerMapV2,
-        MessageType::VectorFieldV1,
+        MessageType::VectorFieldV2,
         MessageType::StageStatsV1,
         MessageType::FlowStatsV1,
     ];
@@ -48,7 +48,7 @@ impl MessageType {
             MessageType::RfFrameV2 => "RfFrameV2",
             MessageType::IqFrameV2 => "IqFrameV2",
             MessageType::DopplerMapV2 => "DopplerMapV2",
-            MessageType::VectorFieldV1 => "VectorFieldV1",
+            MessageType::VectorFieldV2 => "VectorFieldV2",
             MessageType::StageStatsV1 => "StageStatsV1",
             MessageType::FlowStatsV1 => "FlowStatsV1",
         }
@@ -123,6 +123,11 @@ pub const RETIRED: &[(&str, &str, &str)] = &[
         "DopplerMapV2",
         "the header gained the clutter filter: kind, order or rank, cut-off, energy removed",
     ),
+    (
+        "VectorFieldV1",
+        "VectorFieldV2",
+        "the header gained the clutter filter of the looks and the looks used and left out",
+    ),
 ];
 
 /// Ties a [`MessageType`] to its header and payload element types.
@@ -169,7 +174,7 @@ message_type!(IqFrame, IqFrameV2, IqFrameHeaderV2, Complex32, |h| Some(h.grid.nx
 message_type!(DopplerMap, DopplerMapV2, DopplerMapHeaderV2, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
-message_type!(VectorField, VectorFieldV1, VectorFieldHeaderV1, f32, |h| Some(
+message_type!(VectorField, VectorFieldV2, VectorFieldHeaderV2, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
 message_type!(StageStats, StageStatsV1, StageStatsHeaderV1, u8, |_h| None);
@@ -196,7 +201,7 @@ macro_rules! with_type {
                 type $M = $crate::types::DopplerMap;
                 $body
             }
-            $crate::MessageType::VectorFieldV1 => {
+            $crate::MessageType::VectorFieldV2 => {
                 type $M = $crate::types::VectorField;
                 $body
             }
@@ -231,6 +236,8 @@ mod tests {
         assert!(e.contains("IqFrameV1") && e.contains("retired") && e.contains("IqFrameV2"), "{e}");
         let e = MessageType::parse("RfFrameV1").unwrap_err();
         assert!(e.contains("RfFrameV2") && e.contains("element width"), "{e}");
+        let e = MessageType::parse("VectorFieldV1").unwrap_err();
+        assert!(e.contains("VectorFieldV2") && e.contains("clutter filter"), "{e}");
         let e = MessageType::parse("IqFrame").unwrap_err();
         assert!(e.contains("unknown") && e.contains("DopplerMapV2"), "{e}");
     }

@@ -72,8 +72,8 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
             let h: DopplerMapHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
-        MessageType::VectorFieldV1 => {
-            let h: VectorFieldHeaderV1 = bytemuck::try_pod_read_unaligned(header).ok()?;
+        MessageType::VectorFieldV2 => {
+            let h: VectorFieldHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
         MessageType::IqFrameV2 => {

@@ -8,7 +8,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV2`].
 pub const MAX_TX_ELEMENTS: usize = 256;
-/// Maximum number of planes in a map ([`DopplerMapHeaderV2`], [`VectorFieldHeaderV1`]).
+/// Maximum number of planes in a map ([`DopplerMapHeaderV2`], [`VectorFieldHeaderV2`]).
 pub const MAX_PLANES: usize = 8;
 
 /// `flags` bit: last message of the stream; the payload may be empty.
@@ -193,7 +193,7 @@ pub const APODIZATION_BOXCAR: u32 = 0;
 /// `IqFrameHeaderV2::apodization`: Hann window across the aperture.
 pub const APODIZATION_HANN: u32 = 1;
 
-/// Plane ids of maps ([`DopplerMapHeaderV2::plane_ids`], [`VectorFieldHeaderV1::plane_ids`]).
+/// Plane ids of maps ([`DopplerMapHeaderV2::plane_ids`], [`VectorFieldHeaderV2::plane_ids`]).
 pub mod plane {
     /// Unused slot.
     pub const NONE: u32 = 0;
@@ -276,29 +276,47 @@ wire_struct! {
     }
 }
 
-/// `VectorFieldHeaderV1::source`: raw vector Doppler.
+/// `VectorFieldHeaderV2::source`: raw vector Doppler.
 pub const VECTOR_RAW: u32 = 0;
-/// `VectorFieldHeaderV1::source`: regularised.
+/// `VectorFieldHeaderV2::source`: regularised.
 pub const VECTOR_REGULARISED: u32 = 1;
-/// `VectorFieldHeaderV1::source`: ground truth.
+/// `VectorFieldHeaderV2::source`: ground truth.
 pub const VECTOR_TRUTH: u32 = 2;
 
 wire_struct! {
     /// Header of a 2-component vector field. Payload: f32 planes as in the Doppler map
-    /// (typically vx, vz, and mask or weight).
-    pub struct VectorFieldHeaderV1 as "sonoflow_msgs/VectorFieldHeaderV1" {
+    /// (typically vx, vz, and mask or weight). A raw vector-Doppler field carries the clutter
+    /// filter of the looks it was solved from, and a regularised one passes it on, so that a
+    /// stage that sees only the vector field (an evaluator, a recording) can tell how it was made.
+    pub struct VectorFieldHeaderV2 as "sonoflow_msgs/VectorFieldHeaderV2" {
         pub common: MsgHeaderV1,
         pub grid: GridV1,
         /// Smoothing parameter S used (regularised fields), else 0.
         pub smoothing_s: f64,
         /// Fraction of points down-weighted as outliers (regularised fields), else 0.
         pub outlier_fraction: f64,
+        /// Clutter filter cut-off of the looks, a fraction of the PRF (IIR; SVD with an adaptive
+        /// rank), else 0.
+        pub clutter_cutoff: f64,
+        /// Mean over the looks of the fraction of the packet's energy the clutter filter removed
+        /// (SVD), else 0.
+        pub clutter_removed_energy: f64,
         pub n_planes: u32,
         /// `VECTOR_RAW`, `VECTOR_REGULARISED` or `VECTOR_TRUTH`.
         pub source: u32,
         pub packet: u32,
         /// 1 if the producing iteration converged.
         pub converged: u32,
+        /// Clutter filter of the looks: `CLUTTER_NONE` (also ground truth), `CLUTTER_POLYNOMIAL`,
+        /// `CLUTTER_IIR` or `CLUTTER_SVD`.
+        pub clutter_filter: u32,
+        /// Polynomial degree or IIR order; SVD: the largest rank removed among the looks.
+        pub clutter_order: u32,
+        /// Looks (receive angle × band × transmit) the vector field was solved from, 0 if not a
+        /// vector-Doppler field.
+        pub n_looks: u32,
+        /// Of those, looks left out of the solve (the Doppler node's `look_rejection`).
+        pub rejected_looks: u32,
         pub plane_ids: [u32; 8],
     }
 }

@@ -15,7 +15,7 @@ fn sizes_are_pinned() {
     assert_eq!(size_of::<Complex32>(), 8);
     assert_eq!(size_of::<IqFrameHeaderV2>(), 192);
     assert_eq!(size_of::<DopplerMapHeaderV2>(), 224);
-    assert_eq!(size_of::<VectorFieldHeaderV1>(), 168);
+    assert_eq!(size_of::<VectorFieldHeaderV2>(), 200);
     assert_eq!(size_of::<StageStatsHeaderV1>(), 128);
     assert_eq!(size_of::<FlowStatsHeaderV1>(), 160);
     assert_eq!(size_of::<BoundaryFluxV1>(), 32);
@@ -55,7 +55,7 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(IqFrameHeaderV2, pitch), 144);
     assert_eq!(offset_of!(IqFrameHeaderV2, n_elements), 180);
     assert_eq!(offset_of!(DopplerMapHeaderV2, plane_ids), 192);
-    assert_eq!(offset_of!(VectorFieldHeaderV1, plane_ids), 136);
+    assert_eq!(offset_of!(VectorFieldHeaderV2, plane_ids), 168);
     assert_eq!(offset_of!(StageStatsHeaderV1, messages_in), 72);
     assert_eq!(offset_of!(FlowStatsHeaderV1, dt), 64);
     assert_eq!(offset_of!(FlowStatsHeaderV1, guard_corrections), 120);
@@ -140,13 +140,13 @@ fn cdr_round_trip_and_errors() {
 #[test]
 fn viz_pictures_have_the_grid_geometry() {
     use foxglove::Decode;
-    let mut h = VectorFieldHeaderV1::default();
+    let mut h = VectorFieldHeaderV2::default();
     h.grid = GridV1 { x0: -0.01, z0: 0.005, dx: 1e-3, dz: 2e-3, nx: 3, nz: 2 };
     h.n_planes = 2;
     h.plane_ids[0] = plane::VX;
     h.plane_ids[1] = plane::VZ;
     let payload: Vec<f32> = (0..12).map(|i| i as f32).collect();
-    let v = viz::viz(MessageType::VectorFieldV1, bytemuck::bytes_of(&h), bytemuck::cast_slice(&payload)).unwrap();
+    let v = viz::viz(MessageType::VectorFieldV2, bytemuck::bytes_of(&h), bytemuck::cast_slice(&payload)).unwrap();
     assert_eq!(v.schema_name, "foxglove.Grid");
     let g = foxglove::schemas::Grid::decode(&v.data[..]).unwrap();
     assert_eq!(g.column_count, 3);

@@ -14,7 +14,7 @@ use sonoflow_node_kit::{thread_cpu_ns, Kit};
 pub const SPEC: KindSpec = KindSpec::new(
     "analytic-flow",
     "scatterers moved by an analytic flow (Poiseuille vessel, rotating disk, plug band) at the acquisition times, plus the exact field as ground truth",
-    &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV1, false)],
+    &[port("particles", Out, ParticleSnapshotV1, true), port("truth", Out, VectorFieldV2, false)],
     validate,
     run,
 );

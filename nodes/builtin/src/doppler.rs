@@ -12,7 +12,7 @@ use sonoflow_doppler::{Aperture, Estimator, LookHeader, PacketAssembler, PacketP
 use sonoflow_messages::types::{DopplerMap as DopplerMapMsg, IqFrame, VectorField};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, APODIZATION_HANN,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV2, APODIZATION_HANN,
     CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD, VECTOR_RAW,
 };
 use sonoflow_node_kit::PortDir::*;
@@ -24,7 +24,7 @@ pub const SPEC: KindSpec = KindSpec::new(
     "colour + vector Doppler per packet: lag-L slow-time autocorrelation (eq. 19) or Loupas per look, fc²-weighted least-squares (vx, vz) through each look's receive aperture",
     &[
         port("iq", In, IqFrameV2, true),
-        port("vector", Out, VectorFieldV1, true),
+        port("vector", Out, VectorFieldV2, true),
         port("maps", Out, DopplerMapV2, false),
     ],
     validate,
@@ -59,11 +59,21 @@ pub fn look_header(h: &IqFrameHeaderV2) -> LookHeader {
     }
 }
 
+/// The wire's `CLUTTER_*` for the library's clutter filter kind.
+fn wire_clutter_kind(kind: u32) -> u32 {
+    match kind {
+        clutter_kind::POLYNOMIAL => CLUTTER_POLYNOMIAL,
+        clutter_kind::IIR => CLUTTER_IIR,
+        clutter_kind::SVD => CLUTTER_SVD,
+        _ => CLUTTER_NONE,
+    }
+}
+
 /// A header and its payload planes.
 type Message<H> = (H, Vec<f32>);
 
 /// The messages of one packet: one Doppler map per look, then the vector field.
-pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, Message<VectorFieldHeaderV1>) {
+pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, Message<VectorFieldHeaderV2>) {
     let n = r.grid.nx * r.grid.nz;
     let grid = sonoflow_messages::GridV1 {
         x0: r.grid.x0,
@@ -101,12 +111,7 @@ pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, 
                     Estimator::Autocorrelation => 0,
                     Estimator::Loupas => 1,
                 },
-                clutter_filter: match l.clutter.kind {
-                    clutter_kind::POLYNOMIAL => CLUTTER_POLYNOMIAL,
-                    clutter_kind::IIR => CLUTTER_IIR,
-                    clutter_kind::SVD => CLUTTER_SVD,
-                    _ => CLUTTER_NONE,
-                },
+                clutter_filter: wire_clutter_kind(l.clutter.kind),
                 clutter_order: l.clutter.order_or_rank as u32,
                 clutter_cutoff: l.clutter.cutoff,
                 clutter_removed_energy: l.clutter.removed_energy,
@@ -129,12 +134,19 @@ pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, 
     planes.extend_from_slice(&r.vector.vz);
     planes.extend(r.vector.flags.iter().map(|f| *f as f32));
     planes.extend_from_slice(&r.power);
-    let mut vh = VectorFieldHeaderV1 {
+    let clutter = r.clutter_summary().unwrap_or_default();
+    let mut vh = VectorFieldHeaderV2 {
         grid,
         n_planes: 4,
         source: VECTOR_RAW,
         packet: r.packet,
         converged: 1,
+        clutter_filter: wire_clutter_kind(clutter.kind),
+        clutter_order: clutter.order_or_rank as u32,
+        clutter_cutoff: clutter.cutoff,
+        clutter_removed_energy: clutter.removed_energy,
+        n_looks: r.looks.len() as u32,
+        rejected_looks: r.rejected_looks.len() as u32,
         ..Default::default()
     };
     vh.plane_ids[..4].copy_from_slice(&[plane::VX, plane::VZ, plane::FLAGS, plane::POWER]);

@@ -27,9 +27,9 @@ pub const SPEC: KindSpec = KindSpec::new(
     "evaluator",
     "errors of raw/regularised vector fields against the ground truth per packet (paper 1's measure) → evaluation.json/.md, the run report and its figures (with `maps`: colour Doppler)",
     &[
-            port("truth", In, VectorFieldV1, true),
-            port("raw", In, VectorFieldV1, false),
-            port("regularised", In, VectorFieldV1, false),
+            port("truth", In, VectorFieldV2, true),
+            port("raw", In, VectorFieldV2, false),
+            port("regularised", In, VectorFieldV2, false),
             port("maps", In, DopplerMapV2, false),
         ],
     validate,

@@ -11,7 +11,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec::new(
     "field-noise",
     "adds Gaussian noise, gross outliers and missing pixels to vector fields (deterministic; exercises the regulariser)",
-    &[port("clean", In, VectorFieldV1, true), port("noisy", Out, VectorFieldV1, true)],
+    &[port("clean", In, VectorFieldV2, true), port("noisy", Out, VectorFieldV2, true)],
     validate_field_noise,
     run_field_noise,
 );
@@ -55,10 +55,10 @@ pub fn validate_field_noise(v: &serde_json::Value) -> Result<(), String> {
 /// `flags` plane when `missing_fraction > 0` and the field has none. Returns the new header.
 pub fn corrupt_field(
     p: &FieldNoiseParams,
-    h: &sonoflow_messages::VectorFieldHeaderV1,
+    h: &sonoflow_messages::VectorFieldHeaderV2,
     src: &[f32],
     dst: &mut Vec<f32>,
-) -> anyhow::Result<sonoflow_messages::VectorFieldHeaderV1> {
+) -> anyhow::Result<sonoflow_messages::VectorFieldHeaderV2> {
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, StandardNormal};
     use sonoflow_messages::{plane, VECTOR_RAW};

@@ -1,6 +1,6 @@
 //! What the two flow producers (`analytic-flow`, `sph-flow`) put on the wire: a frame's fluid
 //! particles (the scatterers) as `ParticleSnapshotV1`, a packet's ground truth as
-//! `VectorFieldV1` (planes vx, vz, mask).
+//! `VectorFieldV2` (planes vx, vz, mask).
 
 use sonoflow_analytic_flow::{AcquisitionTime, GridSpec, Particles, Truth};
 use sonoflow_messages::types::{ParticleSnapshot, VectorField};
@@ -72,7 +72,7 @@ pub fn publish_truth(
     t: f64,
 ) -> anyhow::Result<()> {
     let nn = truth.vx.len();
-    let mut vh = VectorFieldHeaderV1 {
+    let mut vh = VectorFieldHeaderV2 {
         grid: GridV1 { x0: grid.x0, z0: grid.z0, dx: grid.dx, dz: grid.dz, nx: grid.nx, nz: grid.nz },
         n_planes: 3,
         source: VECTOR_TRUTH,

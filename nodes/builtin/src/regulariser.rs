@@ -8,7 +8,7 @@
 
 use sonoflow_messages::types::VectorField;
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::{plane, MsgHeaderV1, VectorFieldHeaderV1, MAX_PLANES, VECTOR_REGULARISED};
+use sonoflow_messages::{plane, MsgHeaderV1, VectorFieldHeaderV2, MAX_PLANES, VECTOR_REGULARISED};
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
 use sonoflow_regularise::{FieldRegulariser, PlaneRole};
@@ -20,7 +20,7 @@ pub use sonoflow_regularise::RegulariserParams;
 pub const SPEC: KindSpec = KindSpec::new(
     "regulariser",
     "robust unsupervised smoothing of vector fields (Garcia's smoothn): raw → regularised, with the S used and the outlier fraction",
-    &[port("raw", In, VectorFieldV1, true), port("regularised", Out, VectorFieldV1, true)],
+    &[port("raw", In, VectorFieldV2, true), port("regularised", Out, VectorFieldV2, true)],
     validate,
     run,
 );
@@ -57,10 +57,10 @@ impl Regulariser {
     /// plane order as the input); returns the output header.
     pub fn process(
         &mut self,
-        h: &VectorFieldHeaderV1,
+        h: &VectorFieldHeaderV2,
         planes: &[f32],
         planes_out: &mut Vec<f32>,
-    ) -> anyhow::Result<VectorFieldHeaderV1> {
+    ) -> anyhow::Result<VectorFieldHeaderV2> {
         let np = h.n_planes as usize;
         if np == 0 || np > MAX_PLANES {
             anyhow::bail!("vector field frame {}: n_planes = {np} must be 1 ..= {MAX_PLANES}", h.common.frame_id);
@@ -123,8 +123,8 @@ mod tests {
     use super::*;
     use sonoflow_messages::GridV1;
 
-    fn field(nx: u32, nz: u32, ids: &[u32]) -> (VectorFieldHeaderV1, Vec<f32>) {
-        let mut h = VectorFieldHeaderV1 {
+    fn field(nx: u32, nz: u32, ids: &[u32]) -> (VectorFieldHeaderV2, Vec<f32>) {
+        let mut h = VectorFieldHeaderV2 {
             grid: GridV1 { x0: 0.0, z0: 0.0, dx: 1e-4, dz: 1e-4, nx, nz },
             n_planes: ids.len() as u32,
             ..Default::default()
@@ -151,7 +151,7 @@ mod tests {
         let (h, v) = field(8, 6, &[plane::VX, plane::VZ]);
         let e = r.process(&h, &v[..10], &mut Vec::new()).unwrap_err().to_string();
         assert!(e.contains("need 96 values, got 10"), "{e}");
-        let e = r.process(&VectorFieldHeaderV1 { n_planes: 99, ..h }, &v, &mut Vec::new()).unwrap_err().to_string();
+        let e = r.process(&VectorFieldHeaderV2 { n_planes: 99, ..h }, &v, &mut Vec::new()).unwrap_err().to_string();
         assert!(e.contains("n_planes = 99"), "{e}");
         let mut p = RegulariserParams { weights: WeightSource::Power, ..Default::default() };
         let e = Regulariser::new(p.clone()).unwrap().process(&h, &v, &mut Vec::new()).unwrap_err().to_string();
@@ -182,7 +182,11 @@ mod tests {
             PlaneRole::Weight,
             PlaneRole::Power,
         ];
-        let (h, mut v) = field(12, 10, &ids);
+        let (mut h, mut v) = field(12, 10, &ids);
+        // the looks' clutter filter passes on to the regularised field
+        h.clutter_filter = sonoflow_messages::CLUTTER_SVD;
+        (h.clutter_order, h.clutter_cutoff, h.clutter_removed_energy) = (3, 0.05, 0.999);
+        (h.n_looks, h.rejected_looks) = (10, 1);
         let n = 120;
         for i in 0..n {
             v[3 * n + i] = v[i]; // vx in plane 3, vz (the field's second plane) in plane 1
@@ -208,6 +212,11 @@ mod tests {
                 (VECTOR_REGULARISED, 3, 0.25, 0)
             );
             assert_eq!((oh.grid, oh.n_planes, oh.plane_ids), (h.grid, h.n_planes, h.plane_ids));
+            assert_eq!(
+                (oh.clutter_filter, oh.clutter_order, oh.clutter_cutoff, oh.clutter_removed_energy),
+                (sonoflow_messages::CLUTTER_SVD, 3, 0.05, 0.999)
+            );
+            assert_eq!((oh.n_looks, oh.rejected_looks), (10, 1));
             assert!(out[3 * n + 11] == 0.0 && out[n + 11] == 0.0 && out[3 * n + 12] != 0.0, "outside the mask: 0");
             assert!((out[3 * n + 25] - out[3 * n + 24]).abs() < 0.05, "the flagged pixel is filled");
             assert_eq!(&out[..n], &v[..n], "unknown plane passes through");

@@ -19,7 +19,7 @@ pub const SPEC: KindSpec = KindSpec::new(
     "weakly compressible SPH blood flow (paper 1 §2.1–2.2) in a vessel geometry (carotid bifurcation preset): fluid particles = scatterers at the acquisition times, SPH-interpolated ground truth, solver diagnostics",
     &[
             port("particles", Out, ParticleSnapshotV1, true),
-            port("truth", Out, VectorFieldV1, false),
+            port("truth", Out, VectorFieldV2, false),
             port("stats", Out, FlowStatsV1, false),
         ],
     validate,

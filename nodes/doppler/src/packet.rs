@@ -202,6 +202,21 @@ pub struct PacketProducts {
     pub look_residuals: Vec<f64>,
 }
 
+impl PacketProducts {
+    /// The clutter filter of the looks in one report, for the vector field's header: the kind
+    /// and cut-off (one filter serves every look), the largest order or rank removed among the
+    /// looks, and the mean energy removed. `None` without looks.
+    pub fn clutter_summary(&self) -> Option<ClutterReport> {
+        let first = self.looks.first()?.clutter;
+        let n = self.looks.len() as f64;
+        Some(ClutterReport {
+            order_or_rank: self.looks.iter().map(|l| l.clutter.order_or_rank).max().unwrap_or(0),
+            removed_energy: self.looks.iter().map(|l| l.clutter.removed_energy).sum::<f64>() / n,
+            ..first
+        })
+    }
+}
+
 /// One packet's frames of one look.
 struct Stream {
     header: LookHeader,

@@ -9,7 +9,7 @@ use crate::figures::{self, Figure};
 use crate::metrics::{field_error_samples, look_error, look_error_samples, FieldError, LookError, PixelGrid, Samples};
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::{
-    plane, DopplerMapHeaderV2, GridV1, VectorFieldHeaderV1, CLUTTER_IIR, CLUTTER_POLYNOMIAL, CLUTTER_SVD,
+    plane, DopplerMapHeaderV2, GridV1, VectorFieldHeaderV2, CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD,
 };
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -95,6 +95,53 @@ pub struct Evaluation {
     /// without a clutter filter).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clutter: Vec<ClutterUse>,
+    /// Per estimated field (`raw`, `regularised`, …): the clutter filter its headers report (the
+    /// looks' filter, which a regularised field passes on) and the looks used and left out; only
+    /// fields made with a clutter filter or with looks left out. Here `maps` counts the field's
+    /// messages (packets).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub field_clutter: BTreeMap<String, FieldClutter>,
+}
+
+/// How one estimated field was made, from its headers: the looks' clutter filter and the looks
+/// the vector solve used and left out.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FieldClutter {
+    /// The filter (`None` without one); `maps` counts the field's packets.
+    pub filter: Option<ClutterUse>,
+    /// Looks per packet (largest over the packets).
+    pub looks: u32,
+    /// Looks left out of the vector solve, summed over the packets.
+    pub rejected_looks: u32,
+}
+
+impl FieldClutter {
+    /// Adds one field header (ground truth and fields without looks add nothing).
+    pub fn tally(fields: &mut BTreeMap<String, FieldClutter>, name: &str, h: &VectorFieldHeaderV2) {
+        if h.n_looks == 0 && h.clutter_filter == CLUTTER_NONE {
+            return;
+        }
+        let f = fields.entry(name.to_string()).or_default();
+        f.looks = f.looks.max(h.n_looks);
+        f.rejected_looks += h.rejected_looks;
+        let mut uses: Vec<ClutterUse> = f.filter.take().into_iter().collect();
+        ClutterUse::tally_one(&mut uses, h.clutter_filter, h.clutter_order, h.clutter_cutoff, h.clutter_removed_energy);
+        f.filter = uses.pop();
+    }
+
+    /// One line for the report.
+    pub fn describe(&self, name: &str) -> String {
+        let filter = match &self.filter {
+            Some(u) => format!("clutter filter {}", u.describe().replace(" maps)", " packets)")),
+            None => "no clutter filter".to_string(),
+        };
+        let looks = match (self.looks, self.rejected_looks) {
+            (0, _) => String::new(),
+            (n, 0) => format!("; {n} looks, none left out"),
+            (n, r) => format!("; {n} looks, {r} left out over the packets (look rejection)"),
+        };
+        format!("`{name}`: {filter}{looks}")
+    }
 }
 
 /// One clutter filter as the Doppler maps of a run report it.
@@ -116,29 +163,30 @@ pub struct ClutterUse {
 impl ClutterUse {
     /// Adds one map's header to the tally in `uses` (nothing for maps without a clutter filter).
     pub fn tally(uses: &mut Vec<ClutterUse>, h: &DopplerMapHeaderV2) {
-        let filter = match h.clutter_filter {
+        Self::tally_one(uses, h.clutter_filter, h.clutter_order, h.clutter_cutoff, h.clutter_removed_energy)
+    }
+
+    /// Adds one message's filter (`CLUTTER_*`, order or rank, cut-off, energy removed) to the
+    /// tally in `uses` (nothing for `CLUTTER_NONE`).
+    pub fn tally_one(uses: &mut Vec<ClutterUse>, kind: u32, order: u32, cutoff: f64, removed_energy: f64) {
+        let filter = match kind {
             CLUTTER_POLYNOMIAL => "polynomial",
             CLUTTER_IIR => "iir",
             CLUTTER_SVD => "svd",
             _ => return,
         };
-        let i = match uses.iter().position(|u| u.filter == filter && u.cutoff == h.clutter_cutoff) {
+        let i = match uses.iter().position(|u| u.filter == filter && u.cutoff == cutoff) {
             Some(i) => i,
             None => {
-                let u = ClutterUse {
-                    filter: filter.into(),
-                    cutoff: h.clutter_cutoff,
-                    order_min: u32::MAX,
-                    ..Default::default()
-                };
+                let u = ClutterUse { filter: filter.into(), cutoff, order_min: u32::MAX, ..Default::default() };
                 uses.push(u);
                 uses.len() - 1
             }
         };
         let u = &mut uses[i];
-        u.order_min = u.order_min.min(h.clutter_order);
-        u.order_max = u.order_max.max(h.clutter_order);
-        u.removed_energy_mean += (h.clutter_removed_energy - u.removed_energy_mean) / (u.maps + 1) as f64;
+        u.order_min = u.order_min.min(order);
+        u.order_max = u.order_max.max(order);
+        u.removed_energy_mean += (removed_energy - u.removed_energy_mean) / (u.maps + 1) as f64;
         u.maps += 1;
     }
 
@@ -165,7 +213,7 @@ impl ClutterUse {
 }
 
 /// A vector field message: header and planes.
-pub type Field = (VectorFieldHeaderV1, Vec<f32>);
+pub type Field = (VectorFieldHeaderV2, Vec<f32>);
 /// A Doppler map message: header and planes.
 pub type Map = (DopplerMapHeaderV2, Vec<f32>);
 
@@ -183,7 +231,7 @@ pub fn find_plane<'a>(
     data.get(k * n..(k + 1) * n)
 }
 
-pub fn plane_of<'a>(h: &VectorFieldHeaderV1, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
+pub fn plane_of<'a>(h: &VectorFieldHeaderV2, data: &'a [f32], id: u32) -> Option<&'a [f32]> {
     find_plane(&h.grid, h.n_planes, &h.plane_ids, data, id)
 }
 
@@ -264,7 +312,7 @@ pub fn evaluate_pair_samples(truth: &Field, est: &Field, margin: usize) -> anyho
     if th.grid != eh.grid {
         anyhow::bail!("packet {}: the estimate's grid differs from the truth's grid", th.packet);
     }
-    let need = |h: &VectorFieldHeaderV1, d: &'_ [f32], id: u32, what: &str| -> anyhow::Result<Vec<f32>> {
+    let need = |h: &VectorFieldHeaderV2, d: &'_ [f32], id: u32, what: &str| -> anyhow::Result<Vec<f32>> {
         plane_of(h, d, id)
             .map(<[f32]>::to_vec)
             .ok_or_else(|| anyhow::anyhow!("{what} field of packet {} has no `{}` plane", h.packet, plane::name(id)))
@@ -510,6 +558,12 @@ pub fn markdown(e: &Evaluation) -> String {
     for c in &e.clutter {
         let _ = writeln!(s, "\nClutter filter: {}.", c.describe());
     }
+    if !e.field_clutter.is_empty() {
+        let _ = writeln!(s, "\nHow the fields were made (their headers):\n");
+        for (name, f) in &e.field_clutter {
+            let _ = writeln!(s, "- {}.", f.describe(name));
+        }
+    }
     if !e.looks.is_empty() {
         let _ = writeln!(
             s,
@@ -566,7 +620,7 @@ mod tests {
     use sonoflow_messages::GridV1;
 
     fn field(grid: GridV1, packet: u32, planes: &[(u32, Vec<f32>)]) -> Field {
-        let mut h = VectorFieldHeaderV1 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
+        let mut h = VectorFieldHeaderV2 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
         for (k, (id, _)) in planes.iter().enumerate() {
             h.plane_ids[k] = *id;
         }

@@ -37,6 +37,7 @@ pub struct OnlineEvaluation {
     look_pending: BTreeMap<u32, Vec<Map>>,
     look_pools: BTreeMap<(u64, u64, u64), LookPool>,
     clutter: Vec<ClutterUse>,
+    field_clutter: BTreeMap<String, FieldClutter>,
 }
 
 impl OnlineEvaluation {
@@ -51,6 +52,7 @@ impl OnlineEvaluation {
             look_pending: BTreeMap::new(),
             look_pools: BTreeMap::new(),
             clutter: Vec::new(),
+            field_clutter: BTreeMap::new(),
         }
     }
 
@@ -66,6 +68,7 @@ impl OnlineEvaluation {
 
     /// An estimated field named `name` (planes vx, vz, optional flags).
     pub fn add_estimate(&mut self, name: &str, est: Field) {
+        FieldClutter::tally(&mut self.field_clutter, name, &est.0);
         self.estimates.insert((est.0.packet, name.to_string()), est);
     }
 
@@ -137,6 +140,7 @@ impl OnlineEvaluation {
         eval.overall = overall(self.pooled);
         eval.looks = looks(self.look_pools);
         eval.clutter = self.clutter;
+        eval.field_clutter = self.field_clutter;
         if let (Some(dir), true) = (figures_dir, self.params.figures) {
             (eval.figures, eval.warnings) = write_figures(dir, &self.fig, eval.packets.len(), &self.params.label);
         }
@@ -148,11 +152,11 @@ impl OnlineEvaluation {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use sonoflow_messages::{GridV1, VectorFieldHeaderV1};
+    use sonoflow_messages::{GridV1, VectorFieldHeaderV2};
 
     fn field(packet: u32, planes: &[(u32, Vec<f32>)]) -> Field {
         let grid = GridV1 { x0: 0.0, z0: 0.0, dx: 1e-4, dz: 1e-4, nx: 12, nz: 10 };
-        let mut h = VectorFieldHeaderV1 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
+        let mut h = VectorFieldHeaderV2 { grid, packet, n_planes: planes.len() as u32, ..Default::default() };
         for (k, (id, _)) in planes.iter().enumerate() {
             h.plane_ids[k] = *id;
         }
@@ -226,5 +230,35 @@ mod tests {
         assert!((c.removed_energy_mean - 0.98).abs() < 1e-12);
         assert_eq!(c.describe(), "svd (rank 2–3, cut-off 0.050 PRF, 98.0 % of the energy removed on average; 3 maps)");
         assert!(markdown(&e).contains("Clutter filter: svd (rank 2–3"));
+    }
+
+    /// A vector field's header tells how it was made (without any maps): the looks' filter and
+    /// the looks used and left out, tallied per field; ground truth and filterless fields without
+    /// looks add nothing.
+    #[test]
+    fn clutter_filter_of_the_vector_fields_is_reported() {
+        use sonoflow_messages::{CLUTTER_NONE, CLUTTER_POLYNOMIAL};
+        let mut ev = OnlineEvaluation::new(EvaluatorParams { figures: false, ..Default::default() });
+        for (packet, rejected) in [(0, 1), (1, 0)] {
+            let mut raw = field(packet, &[(plane::VX, vec![0.0; 120]), (plane::VZ, vec![0.0; 120])]);
+            raw.0.clutter_filter = CLUTTER_POLYNOMIAL;
+            (raw.0.clutter_order, raw.0.n_looks, raw.0.rejected_looks) = (2, 10, rejected);
+            ev.add_estimate("raw", raw);
+            let mut plain = field(packet, &[(plane::VX, vec![0.0; 120]), (plane::VZ, vec![0.0; 120])]);
+            plain.0.clutter_filter = CLUTTER_NONE;
+            plain.0.n_looks = 2;
+            ev.add_estimate("paper", plain);
+            ev.add_estimate("external", field(packet, &[(plane::VX, vec![0.0; 120]), (plane::VZ, vec![0.0; 120])]));
+        }
+        let e = ev.finish(None);
+        assert_eq!(e.field_clutter.len(), 2, "{:?}", e.field_clutter.keys());
+        let raw = &e.field_clutter["raw"];
+        assert_eq!((raw.looks, raw.rejected_looks), (10, 1));
+        let f = raw.filter.as_ref().unwrap();
+        assert_eq!((f.filter.as_str(), f.order_min, f.order_max, f.maps), ("polynomial", 2, 2, 2));
+        assert!(e.field_clutter["paper"].filter.is_none());
+        let md = markdown(&e);
+        assert!(md.contains("`raw`: clutter filter polynomial (degree 2; 2 packets); 10 looks, 1 left out"), "{md}");
+        assert!(md.contains("`paper`: no clutter filter; 2 looks, none left out"), "{md}");
     }
 }

@@ -5,7 +5,7 @@
 //! ```toml
 //! [nodes.doppler.variants.external]
 //! exec = "sonoflow-example-estimator"
-//! ports = { iq = "IqFrameV2", vector = "VectorFieldV1", maps = "DopplerMapV2" }
+//! ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }
 //! ```
 //! `sonoflow run launch/quickstart.toml --swap doppler=external`.
 //!
@@ -17,7 +17,7 @@
 
 use sonoflow_messages::types::{DopplerMap, IqFrame, VectorField};
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV1, VECTOR_RAW,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV2, VECTOR_RAW,
 };
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Kit, Output};
 use std::collections::BTreeMap;
@@ -209,12 +209,13 @@ fn estimate(kit: &mut Kit, ports: &mut Ports, pairs: BTreeMap<(u64, u64), Pair>,
         out[i] = ((a22 * atb[i][0] - a12 * atb[i][1]) / det) as f32;
         out[n + i] = ((a11 * atb[i][1] - a12 * atb[i][0]) / det) as f32;
     }
-    let mut vh = VectorFieldHeaderV1 {
+    let mut vh = VectorFieldHeaderV2 {
         grid: first.grid,
         n_planes: 4,
         source: VECTOR_RAW,
         packet: first.packet,
         converged: 1,
+        n_looks: pairs.len() as u32,
         ..Default::default()
     };
     vh.plane_ids[..4].copy_from_slice(&[plane::VX, plane::VZ, plane::FLAGS, plane::POWER]);
