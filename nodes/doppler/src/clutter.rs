@@ -205,6 +205,29 @@ impl ClutterParams {
         })
     }
 
+    /// [`Self::apply_frames`], and the filter as the slow-time matrix it applied to every pixel
+    /// (`n × n` for `n` frames, row-major, `y_t = Σ_j H[t·n + j] x_j`; every filter here is linear
+    /// in slow time): the SVD's from its removed components, the polynomial and IIR filters' by
+    /// filtering the n unit impulses. What [`crate::compensate`] needs.
+    pub fn apply_frames_with_response(&self, frames: &mut [&mut [C32]]) -> Result<(ClutterReport, Vec<Complex<f64>>)> {
+        let n = frames.len();
+        if let ClutterParams::Svd { tissue_cutoff, rank, .. } = *self {
+            let o = self.svd()?.apply_frames(frames)?;
+            let cutoff = if rank.is_some() { 0.0 } else { tissue_cutoff };
+            let report =
+                ClutterReport { kind: kind::SVD, order_or_rank: o.rank, cutoff, removed_energy: o.removed_energy };
+            return Ok((report, o.slow_time_matrix(n)));
+        }
+        let report = self.apply_frames(frames)?;
+        // pixel j of the impulse packet is the unit impulse at frame j
+        let mut impulses: Vec<Vec<C32>> =
+            (0..n).map(|t| (0..n).map(|j| C32::new(if t == j { 1.0 } else { 0.0 }, 0.0)).collect()).collect();
+        let mut refs: Vec<&mut [C32]> = impulses.iter_mut().map(|f| f.as_mut_slice()).collect();
+        self.apply_frames(&mut refs)?;
+        let h = (0..n * n).map(|i| impulses[i / n][i % n]).map(|v| Complex::new(f64::from(v.re), f64::from(v.im)));
+        Ok((report, h.collect()))
+    }
+
     /// Filters a packet given as one mutable slice per frame.
     pub fn apply_frames(&self, frames: &mut [&mut [C32]]) -> Result<ClutterReport> {
         match *self {

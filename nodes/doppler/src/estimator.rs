@@ -478,6 +478,12 @@ impl DopplerEstimator {
         Ok(())
     }
 
+    /// The last packet's per-pixel slow-time power R0 and lag-L autocorrelation R_L, after the
+    /// spatial window (what the velocity and variance came from).
+    pub fn autocorrelation(&self) -> (&[f64], &[C64]) {
+        (&self.r0, &self.r1)
+    }
+
     /// [`DopplerEstimator::estimate`] into a new map.
     pub fn estimate_to_map(&mut self, packet: Packet<'_>) -> Result<DopplerMap> {
         let mut m = DopplerMap::default();

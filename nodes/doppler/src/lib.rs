@@ -19,6 +19,7 @@
 
 pub mod aperture;
 pub mod clutter;
+pub mod compensate;
 pub mod estimator;
 pub mod iir;
 pub mod packet;
@@ -30,6 +31,7 @@ pub mod vector;
 
 pub use aperture::{aperture_projection, Aperture};
 pub use clutter::{ClutterFilter, ClutterParams, ClutterReport};
+pub use compensate::{Compensation, FilterResponse};
 pub use estimator::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
 pub use iir::{IirHighPass, IirInit};
 pub use packet::{mean_power, LookHeader, LookMap, PacketAssembler, PacketParams, PacketProducts, ProjectionMode};

@@ -16,7 +16,8 @@ use sonoflow_beamform::{BeamformError, Grid, C32};
 
 use crate::aperture::{aperture_projection, Aperture};
 use crate::clutter::{ClutterParams, ClutterReport};
-use crate::estimator::{DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
+use crate::compensate::{Compensation, FilterResponse};
+use crate::estimator::{flags, DopplerEstimator, DopplerMap, DopplerParams, Estimator, Packet, WindowShape};
 use crate::vector::{nominal_projection, outlier_looks, solve_vector_weighted, Projection, VectorField, VectorInput};
 
 /// Which projection vectors the vector solve uses.
@@ -58,6 +59,11 @@ pub struct PacketParams {
     /// against the field of the other looks exceeds this many times theirs is left out and the
     /// field solved again; 0 = off. Default 4; > 1 otherwise.
     pub look_rejection: f64,
+    /// Undo the clutter filter's bias of each look's mean frequency ([`crate::compensate`]):
+    /// per pixel, the (mean, width) of a Gaussian blood spectrum whose filtered lag-L
+    /// autocorrelation matches the measured one. Autocorrelation estimator only; without a
+    /// clutter filter nothing to do. Default false (the paper's estimator).
+    pub compensate_filter: bool,
 }
 
 impl Default for PacketParams {
@@ -72,6 +78,7 @@ impl Default for PacketParams {
             clutter: None,
             projection: ProjectionMode::Aperture,
             look_rejection: 4.0,
+            compensate_filter: false,
         }
     }
 }
@@ -108,6 +115,13 @@ impl PacketParams {
         let r = self.look_rejection;
         if !(r == 0.0 || (r.is_finite() && r > 1.0 && r <= 1e3)) {
             return Err(invalid("look_rejection", r, "0 (off) or in (1, 1000]"));
+        }
+        if self.compensate_filter && self.estimator != Estimator::Autocorrelation {
+            return Err(invalid(
+                "compensate_filter",
+                true,
+                "false with estimator = \"loupas\" (the compensation models the autocorrelation estimator)",
+            ));
         }
         Ok(())
     }
@@ -161,6 +175,8 @@ pub struct LookMap {
     pub projection: Option<Vec<[f32; 2]>>,
     /// What the clutter filter did to this look's packet.
     pub clutter: ClutterReport,
+    /// What `compensate_filter` did (pixels corrected and kept).
+    pub compensation: Compensation,
 }
 
 impl LookMap {
@@ -329,9 +345,16 @@ impl PacketAssembler {
                 (None, None) => None,
             };
             let mut clutter_report = ClutterReport::default();
+            let mut response = None;
             if let Some(c) = clutter {
                 let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-                clutter_report = c.apply_frames(&mut refs)?;
+                if self.params.compensate_filter {
+                    let (report, h) = c.apply_frames_with_response(&mut refs)?;
+                    clutter_report = report;
+                    response = Some(FilterResponse::new(&h, frames.len(), dp.lag)?);
+                } else {
+                    clutter_report = c.apply_frames(&mut refs)?;
+                }
             }
             let mut est = DopplerEstimator::new(dp.clone(), nx, nz, h.grid.dz)?;
             if dp.estimator == Estimator::Loupas {
@@ -341,6 +364,13 @@ impl PacketAssembler {
             }
             let refs: Vec<&[C32]> = frames.iter().map(|f| f.as_slice()).collect();
             est.estimate(Packet::Frames(&refs), &mut self.map)?;
+            let mut compensation = Compensation::default();
+            if let Some(r) = &response {
+                let (r0, r_lag) = est.autocorrelation();
+                let valid: Vec<bool> = self.map.flags.iter().map(|f| f & flags::NO_ESTIMATE == 0).collect();
+                let scale = h.c * h.prf / (2.0 * h.fc);
+                compensation = r.correct(r0, r_lag, &valid, scale, &mut self.map.velocity);
+            }
             let vn = self.map.nyquist;
             let norm = 2.0 * (vn / std::f64::consts::PI).powi(2);
             let projection = self.projection(&h)?;
@@ -356,6 +386,7 @@ impl PacketAssembler {
                 flags: self.map.flags.clone(),
                 projection,
                 clutter: clutter_report,
+                compensation,
                 header: h,
             });
         }

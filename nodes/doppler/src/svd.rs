@@ -71,6 +71,28 @@ pub struct SvdOutcome {
     pub frequencies: Vec<f64>,
     /// Fraction of the packet's energy removed, Σ_{k<r} σ_k² / Σ σ_k².
     pub removed_energy: f64,
+    /// The removed components' eigenvectors v_k (frames long, orthonormal), largest first: each
+    /// pixel's slow time x became x − Σ_k (v_kᵀ x) conj(v_k).
+    pub removed: Vec<Vec<Complex<f64>>>,
+}
+
+impl SvdOutcome {
+    /// The filter as a slow-time matrix H (`n × n`, row-major, `y_t = Σ_j H[t·n + j] x_j`):
+    /// H = I − Σ_k conj(v_k) v_kᵀ.
+    pub fn slow_time_matrix(&self, n: usize) -> Vec<Complex<f64>> {
+        let mut h = vec![Complex::new(0.0, 0.0); n * n];
+        for t in 0..n {
+            h[t * n + t] = Complex::new(1.0, 0.0);
+        }
+        for v in &self.removed {
+            for t in 0..n {
+                for j in 0..n {
+                    h[t * n + j] -= v[t].conj() * v[j];
+                }
+            }
+        }
+        h
+    }
 }
 
 /// The SVD clutter filter (see the module doc).
@@ -166,9 +188,8 @@ impl SvdFilter {
         };
         let total: f64 = singular_values.iter().map(|v| v * v).sum();
         let removed: f64 = singular_values[..rank].iter().map(|v| v * v).sum();
+        let v: Vec<Vec<Complex<f64>>> = order[..rank].iter().map(|&k| (0..n).map(|t| u[(t, k)]).collect()).collect();
         if rank > 0 {
-            let v: Vec<Vec<Complex<f64>>> =
-                order[..rank].iter().map(|&k| (0..n).map(|t| u[(t, k)]).collect()).collect();
             crate::slowtime::for_each_pixel(frames, |x| {
                 for vk in &v {
                     let c: Complex<f64> = x.iter().zip(vk).map(|(a, b)| a * b).sum();
@@ -179,6 +200,6 @@ impl SvdFilter {
             })?;
         }
         let removed_energy = if total > 0.0 { removed / total } else { 0.0 };
-        Ok(SvdOutcome { rank, singular_values, frequencies, removed_energy })
+        Ok(SvdOutcome { rank, singular_values, frequencies, removed_energy, removed: v })
     }
 }
