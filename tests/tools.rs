@@ -274,6 +274,46 @@ fn sweep_runs_each_point_and_reports_error_against_time() {
     assert!(!dir.path().join("bad").exists());
 }
 
+/// SIGTERM (or Ctrl-C) stops a sweep: the point that was running ends, the points done are
+/// written, no further point starts (before, each later point started and failed at once), and the
+/// sweep exits 130.
+#[test]
+fn an_interrupted_sweep_stops_and_writes_what_it_has() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(bin())
+        .args(["sweep"])
+        .arg(common::root().join("launch/quickstart.toml"))
+        .args(["--set", "flow.schedule.n_packets=2", "--seeds", "flow.seed=1,2,3,4", "--out"])
+        .arg(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = Vec::new();
+    for l in lines.by_ref() {
+        let l = l.unwrap();
+        let started = l.contains("sweep: point 1/4");
+        seen.push(l);
+        if started {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    seen.extend(lines.map_while(Result::ok));
+    let status = child.wait().unwrap();
+    let err = seen.join("\n");
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(err.contains("sweep: interrupted during point"), "{err}");
+    assert!(!err.contains("sweep: point 4/4"), "no point starts after the interrupt: {err}");
+    let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
+    let rows = csv.lines().skip(1).count();
+    assert!((1..4).contains(&rows), "{csv}");
+}
+
 /// `sonoflow sweep --seeds`: every setting once per realisation, and the table over realisations
 /// holds the mean and sample standard deviation of the points' own figures; `--label` reads that
 /// evaluator's file (a missing one is reported per point, exit 1).

@@ -22,6 +22,12 @@ extern "C" fn on_signal(_: libc::c_int) {
     INTERRUPTED.store(true, Ordering::SeqCst);
 }
 
+/// Whether SIGINT/SIGTERM reached this process since its first run started (a caller running
+/// several graphs in a row, such as a sweep, stops there).
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
 fn install_signal_handlers() {
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
     unsafe {

@@ -391,6 +391,14 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
             p.wall_s
         );
         points.push(p);
+        if sonoflow_launcher::supervise::interrupted() {
+            eprintln!(
+                "sweep: interrupted during point {}/{total}: the {} point(s) run so far are written, the rest not run",
+                k + 1,
+                points.len()
+            );
+            break;
+        }
     }
     mark_pareto(&mut points);
     let mut csv =
@@ -484,7 +492,13 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
         svg(&points, &format!("{name}: error against run time")).as_bytes(),
     )?;
     println!("sweep: {} point(s) → {}", points.len(), out.join("sweep.md").display());
-    Ok(if points.iter().all(|p| p.status == "ok") { 0 } else { 1 })
+    Ok(if sonoflow_launcher::supervise::interrupted() {
+        130
+    } else if points.iter().all(|p| p.status == "ok") {
+        0
+    } else {
+        1
+    })
 }
 
 #[cfg(test)]
