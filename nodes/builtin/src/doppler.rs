@@ -198,6 +198,15 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
                 which.join(", ")
             );
         }
+        let (corrected, kept) =
+            r.looks.iter().fold((0, 0), |(c, k), l| (c + l.compensation.corrected, k + l.compensation.kept));
+        if corrected + kept > 0 {
+            eprintln!(
+                "doppler: packet {}: compensate_filter corrected {:.1} % of the estimates ({kept} kept the plain value)",
+                r.packet,
+                100.0 * corrected as f64 / (corrected + kept) as f64
+            );
+        }
         let (maps, (mut vh, planes)) = packet_messages(r);
         if let Some(m) = mout.as_mut() {
             for (mut h, planes) in maps {
