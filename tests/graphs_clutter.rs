@@ -5,7 +5,9 @@
 //! the wire as moving tissue; both evaluators report the filter; the regularised pooled |e|₇₅
 //! stay below twice what this scene gives today (seed 1, SVD with its default 10 dB energy gap:
 //! paper x 17.4 % / z 1.7 %, sonoflow x 6.3 % / z 1.6 %; before the gap: 37.0 / 3.2 % and
-//! 12.4 / 2.1 %), and sonoflow's branch stays ahead of the paper's in x.
+//! 12.4 / 2.1 %), and sonoflow's branch stays ahead of the paper's in x. The coarse
+//! `launch/carotid-clutter.toml` (SPH, 128-frame packets, filter compensation) likewise, on its
+//! first packet (~1.5 min).
 
 mod common;
 use common::*;
@@ -105,4 +107,45 @@ fn look_rejection_leaves_out_the_failed_look_of_a_clutter_realisation() {
     }
     assert!(x[0].0 < 2.0 * 0.046 && x[0].1 < 2.0 * 0.017, "with look rejection: {:?}", x[0]);
     assert!(x[1].0 > 3.0 * x[0].0, "without it the failed look drags x: {x:?}");
+}
+
+/// `launch/carotid-clutter.toml` on the coarse lattice (0.3 mm), its first packet (t = 0.1 s, 128
+/// frames, the file's seeds): the SPH carotid in pulsating tissue with noise, SVD in both chains,
+/// and in sonoflow's branch the filter compensation (logged per packet). Regularised |e|₇₅ today:
+/// paper x 12.2 % / z 1.65 %, sonoflow x 4.9 % / z 0.83 % (without the compensation sonoflow's x
+/// is about twice that: 10.5 % against 6.0 % over seeds 1–3, docs/results.md); asserted below
+/// twice today's, and sonoflow's branch ahead in x.
+#[test]
+fn carotid_clutter_scene_keeps_its_accuracy_with_the_filter_compensation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_graph_ok(
+        "launch/carotid-clutter.toml",
+        dir.path(),
+        &[
+            "--set",
+            "flow.dx=0.3e-3",
+            "--set",
+            "flow.schedule.n_packets=1",
+            "--set",
+            "recorder.topics=[\"regularised\", \"regularised_sf\"]",
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    let line = err.lines().find(|l| l.contains("compensate_filter corrected")).unwrap_or("");
+    let share: f64 =
+        line.split("corrected ").nth(1).and_then(|r| r.split(' ').next()).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    assert!(share > 90.0, "most estimates compensated: {line:?}");
+    let (px, pz, pf) = pooled(dir.path(), "evaluation.json");
+    let (sx, sz, sf) = pooled(dir.path(), "evaluation-subband-divfree.json");
+    eprintln!(
+        "carotid-clutter packet 0: paper x {:.1} % z {:.2} %; sonoflow x {:.1} % z {:.2} %",
+        100.0 * px,
+        100.0 * pz,
+        100.0 * sx,
+        100.0 * sz
+    );
+    assert_eq!((pf.as_str(), sf.as_str()), ("svd", "svd"));
+    assert!(px < 2.0 * 0.122 && pz < 2.0 * 0.0165, "paper chain: x {px}, z {pz}");
+    assert!(sx < 2.0 * 0.049 && sz < 2.0 * 0.0083, "sonoflow's branch: x {sx}, z {sz}");
+    assert!(sx < px, "sonoflow's branch ahead of the paper's in x: {sx} vs {px}");
 }
