@@ -22,7 +22,7 @@ pub use sonoflow_analytic_flow::{AcquisitionTime, GridSpec, Particles as Scatter
 
 use sonoflow_analytic_flow::{LumenShape, Tissue};
 
-use crate::geometry::{Lumen, VesselGeometry, VesselScene};
+use crate::geometry::{Lumen, SdfGrid, VesselGeometry, VesselScene};
 use crate::{Checkpoint, CheckpointError, Diagnostics, ParticleKind, Real, Solver, SphError};
 
 /// Errors of [`Producer::new`] and [`Producer::next_event`].
@@ -127,6 +127,8 @@ struct TruthGrid {
     xs: Vec<Real>,
     zs: Vec<Real>,
     inside: Vec<bool>,
+    /// The lumen's signed distance (for the mask in the vessel's frame under bulk motion).
+    sdf: SdfGrid,
 }
 
 /// The SPH flow through an acquisition schedule (see the module documentation).
@@ -349,13 +351,31 @@ impl Producer {
             }
             Scheduled::Truth { packet, t, frame_id } => {
                 let Some(g) = self.grid.as_ref() else { return self.next_event() };
-                let field = self.solver.sample_velocity(&g.xs, &g.zs);
+                let rigid = self.params.bulk.as_ref().map(|b| b.at(t));
+                // under bulk motion: each lab node's point in the vessel's frame, and its mask there
+                let moved: Option<(Vec<Real>, Vec<Real>, Vec<bool>)> = rigid.map(|r| {
+                    let pts: Vec<(Real, Real)> = g.xs.iter().zip(&g.zs).map(|(&x, &z)| r.invert(x, z)).collect();
+                    let inside = pts.iter().map(|&(x, z)| g.sdf.is_inside(x, z)).collect();
+                    (pts.iter().map(|p| p.0).collect(), pts.iter().map(|p| p.1).collect(), inside)
+                });
+                let (xs, zs, inside) = match &moved {
+                    Some((xs, zs, inside)) => (xs, zs, inside),
+                    None => (&g.xs, &g.zs, &g.inside),
+                };
+                let field = self.solver.sample_velocity(xs, zs);
                 let nn = field.len();
                 let mut truth =
                     Truth { vx: Vec::with_capacity(nn), vz: Vec::with_capacity(nn), mask: Vec::with_capacity(nn) };
-                for (f, &m) in field.iter().zip(&g.inside) {
-                    truth.vx.push(if m { f[0] as f32 } else { 0.0 });
-                    truth.vz.push(if m { f[1] as f32 } else { 0.0 });
+                for (i, (f, &m)) in field.iter().zip(inside).enumerate() {
+                    let v = match &rigid {
+                        Some(r) => {
+                            let a = r.apply(xs[i], zs[i], f[0], f[1]);
+                            [a[2], a[3]]
+                        }
+                        None => [f[0], f[1]],
+                    };
+                    truth.vx.push(if m { v[0] as f32 } else { 0.0 });
+                    truth.vz.push(if m { v[1] as f32 } else { 0.0 });
                     truth.mask.push(m as u8);
                 }
                 Event::Truth(TruthField { packet, t, frame_id, grid: g.spec.clone(), truth })
@@ -364,12 +384,13 @@ impl Producer {
     }
 
     fn snapshot(&mut self, at: AcquisitionTime) -> Snapshot {
+        let rigid = self.params.bulk.as_ref().map(|b| b.at(at.t));
         match &self.wall_waveform {
             Some((u, t0, (lo, hi))) => {
                 let s = at.t - t0;
-                self.tissue.place(((u.value(s) - lo) / (hi - lo), u.derivative(s) / (hi - lo)), None);
+                self.tissue.place(((u.value(s) - lo) / (hi - lo), u.derivative(s) / (hi - lo)), rigid.as_ref());
             }
-            None => self.tissue.update(at.t, None),
+            None => self.tissue.update(at.t, rigid.as_ref()),
         }
         let ps = &self.solver.particles;
         let idx: Vec<usize> = (0..ps.len()).filter(|&i| ps.kind[i] == ParticleKind::Fluid).collect();
@@ -379,12 +400,24 @@ impl Producer {
             None => [0.0, 0.0],
         };
         let offsets: Vec<[Real; 2]> = idx.iter().map(|&i| offset(i)).collect();
+        // position and velocity in the lab frame (the vessel's own without bulk motion)
+        let lab: Vec<[Real; 4]> = idx
+            .iter()
+            .zip(&offsets)
+            .map(|(&i, o)| {
+                let (x, z, vx, vz) = (ps.x[i] + o[0], ps.z[i] + o[1], ps.vx[i], ps.vz[i]);
+                match &rigid {
+                    Some(r) => r.apply(x, z, vx, vz),
+                    None => [x, z, vx, vz],
+                }
+            })
+            .collect();
         let particles = Scatterers {
             id: idx.iter().map(|&i| ps.id[i] as u32).collect(),
-            x: idx.iter().zip(&offsets).map(|(&i, o)| (ps.x[i] + o[0]) as f32).collect(),
-            z: idx.iter().zip(&offsets).map(|(&i, o)| (ps.z[i] + o[1]) as f32).collect(),
-            vx: idx.iter().map(|&i| ps.vx[i] as f32).collect(),
-            vz: idx.iter().map(|&i| ps.vz[i] as f32).collect(),
+            x: lab.iter().map(|l| l[0] as f32).collect(),
+            z: lab.iter().map(|l| l[1] as f32).collect(),
+            vx: lab.iter().map(|l| l[2] as f32).collect(),
+            vz: lab.iter().map(|l| l[3] as f32).collect(),
             amplitude: idx.iter().map(|&i| amplitude(seed, ps.id[i], sigma)).collect(),
         };
         Snapshot {
@@ -394,7 +427,7 @@ impl Producer {
             bbox: particles.bbox(),
             particles,
             tissue: self.tissue.particles().clone(),
-            tissue_moves: self.tissue.pulsates(),
+            tissue_moves: self.tissue.pulsates() || (rigid.is_some() && !self.tissue.particles().is_empty()),
             progress: self.progress(),
         }
     }
@@ -475,7 +508,7 @@ fn truth_grid(g: &GridSpec, scene: &VesselScene) -> TruthGrid {
             inside.push(scene.is_inside(x, z));
         }
     }
-    TruthGrid { spec: g.clone(), xs, zs, inside }
+    TruthGrid { spec: g.clone(), xs, zs, inside, sdf: scene.sdf.clone() }
 }
 
 /// Amplitude of the scatterer with stable id `id`: N(0, σ²), a pure function of (seed, id) (Box–

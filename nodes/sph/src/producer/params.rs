@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Deserializer};
-use sonoflow_analytic_flow::{GridSpec, Schedule, TissueParams};
+use sonoflow_analytic_flow::{BulkMotion, GridSpec, Schedule, TissueParams};
 
 use crate::geometry::{carotid_bifurcation, stenosis, straight_tube, BuildOptions, InitialVelocity, VesselGeometry};
 use crate::{ProfileKind, Real, SphParams, WaveformSpec};
@@ -156,6 +156,12 @@ pub struct ProducerParams {
     /// rigid. See [`sonoflow_analytic_flow::tissue`] and [`super::SphLumen`].
     #[serde(default)]
     pub tissue: Option<TissueParams>,
+    /// Rigid bulk motion of the whole scene (absent: none), as for the analytic scenes
+    /// ([`sonoflow_analytic_flow::BulkMotion`]): the SPH solution is computed in the vessel's own
+    /// frame and the blood scatterers, the tissue, the lumen and the truth field are moved to the
+    /// lab frame (velocities: the flow's, turned, plus the rigid motion's).
+    #[serde(default)]
+    pub bulk: Option<BulkMotion>,
     /// Start from this checkpoint (the node resolves it relative to the launch file's folder).
     #[serde(default)]
     pub checkpoint_in: Option<PathBuf>,
@@ -191,6 +197,7 @@ impl Default for ProducerParams {
             position_seed: None,
             truth_grid: None,
             tissue: None,
+            bulk: None,
             checkpoint_in: None,
             checkpoint_out: None,
             run_until: None,
@@ -255,6 +262,9 @@ impl ProducerParams {
         p.schedule.validate().map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
         if let Some(t) = &p.tissue {
             t.validate().map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
+        }
+        if let Some(b) = &p.bulk {
+            b.validate().map_err(|e| InvalidParams::new(e.field(), e.to_string()))?;
         }
         if let Some(g) = &p.truth_grid {
             g.validate().map_err(|e| {
