@@ -172,6 +172,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         Some(m) => kit.handshake(&mut [&mut input, &mut vout, m])?,
         None => kit.handshake(&mut [&mut input, &mut vout])?,
     }
+    let mut warned_short = false;
     let mut publish = |kit: &mut Kit, r: PacketProducts, compute: u64| -> anyhow::Result<()> {
         if !r.rejected_looks.is_empty() {
             let typical = {
@@ -200,6 +201,13 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         }
         let (corrected, kept) =
             r.looks.iter().fold((0, 0), |(c, k), l| (c + l.compensation.corrected, k + l.compensation.kept));
+        let frames = r.looks.first().map_or(0, |l| l.packet_size);
+        if corrected + kept > 0 && frames < 64 && !warned_short {
+            warned_short = true;
+            eprintln!(
+                "doppler: note: compensate_filter with {frames}-frame packets: measured to help from 64 frames on and to hurt at 32 (docs/nodes.md, \"Filter compensation\")"
+            );
+        }
         if corrected + kept > 0 {
             eprintln!(
                 "doppler: packet {}: compensate_filter corrected {:.1} % of the estimates ({kept} kept the plain value)",
