@@ -159,6 +159,50 @@ pub fn to_c32(iq: &[Complex32]) -> Vec<C32> {
     iq.iter().map(|c| C32::new(c.re, c.im)).collect()
 }
 
+/// The node's log lines for one packet: the looks left out of the vector solve, the share of
+/// estimates the filter compensation corrected, and once (`warned_short`) a note when it runs on
+/// packets shorter than 64 frames.
+fn packet_notes(r: &PacketProducts, warned_short: &mut bool) -> Vec<String> {
+    let mut notes = Vec::new();
+    if !r.rejected_looks.is_empty() {
+        let mut m: Vec<f64> = r.look_residuals.iter().copied().filter(|v| v.is_finite()).collect();
+        m.sort_by(f64::total_cmp);
+        let typical = m.get(m.len() / 2).copied().unwrap_or(f64::NAN);
+        let which: Vec<String> = r
+            .rejected_looks
+            .iter()
+            .map(|&i| {
+                let h = &r.looks[i].header;
+                let (deg, mhz) = (h.rx_angle.to_degrees(), h.fc / 1e6);
+                format!("rx {deg:+.2}° at {mhz:.2} MHz (median residual {:.3} m/s)", r.look_residuals[i])
+            })
+            .collect();
+        notes.push(format!(
+            "doppler: packet {}: left out of the vector solve (look_rejection): {}; the looks' median {typical:.3} m/s",
+            r.packet,
+            which.join(", ")
+        ));
+    }
+    let (corrected, kept) =
+        r.looks.iter().fold((0, 0), |(c, k), l| (c + l.compensation.corrected, k + l.compensation.kept));
+    if corrected + kept == 0 {
+        return notes;
+    }
+    let frames = r.looks.first().map_or(0, |l| l.packet_size);
+    if frames < 64 && !*warned_short {
+        *warned_short = true;
+        notes.push(format!(
+            "doppler: note: compensate_filter with {frames}-frame packets: measured to help from 64 frames on and to hurt at 32 (docs/nodes.md, \"Filter compensation\")"
+        ));
+    }
+    let share = 100.0 * corrected as f64 / (corrected + kept) as f64;
+    notes.push(format!(
+        "doppler: packet {}: compensate_filter corrected {share:.1} % of the estimates ({kept} kept the plain value)",
+        r.packet
+    ));
+    notes
+}
+
 pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let p: PacketParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
     let mut assembler = PacketAssembler::new(p)?;
@@ -174,46 +218,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     }
     let mut warned_short = false;
     let mut publish = |kit: &mut Kit, r: PacketProducts, compute: u64| -> anyhow::Result<()> {
-        if !r.rejected_looks.is_empty() {
-            let typical = {
-                let mut m: Vec<f64> = r.look_residuals.iter().copied().filter(|v| v.is_finite()).collect();
-                m.sort_by(f64::total_cmp);
-                m.get(m.len() / 2).copied().unwrap_or(f64::NAN)
-            };
-            let which: Vec<String> = r
-                .rejected_looks
-                .iter()
-                .map(|&i| {
-                    let h = &r.looks[i].header;
-                    format!(
-                        "rx {:+.2}° at {:.2} MHz (median residual {:.3} m/s)",
-                        h.rx_angle.to_degrees(),
-                        h.fc / 1e6,
-                        r.look_residuals[i]
-                    )
-                })
-                .collect();
-            eprintln!(
-                "doppler: packet {}: left out of the vector solve (look_rejection): {}; the looks' median {typical:.3} m/s",
-                r.packet,
-                which.join(", ")
-            );
-        }
-        let (corrected, kept) =
-            r.looks.iter().fold((0, 0), |(c, k), l| (c + l.compensation.corrected, k + l.compensation.kept));
-        let frames = r.looks.first().map_or(0, |l| l.packet_size);
-        if corrected + kept > 0 && frames < 64 && !warned_short {
-            warned_short = true;
-            eprintln!(
-                "doppler: note: compensate_filter with {frames}-frame packets: measured to help from 64 frames on and to hurt at 32 (docs/nodes.md, \"Filter compensation\")"
-            );
-        }
-        if corrected + kept > 0 {
-            eprintln!(
-                "doppler: packet {}: compensate_filter corrected {:.1} % of the estimates ({kept} kept the plain value)",
-                r.packet,
-                100.0 * corrected as f64 / (corrected + kept) as f64
-            );
+        for line in packet_notes(&r, &mut warned_short) {
+            eprintln!("{line}");
         }
         let (maps, (mut vh, planes)) = packet_messages(r);
         if let Some(m) = mout.as_mut() {
