@@ -38,7 +38,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::nn::data::Dataset;
-use crate::nn::model::{network_inputs, rotational_from_si, scale_rotational, scale_translational, shape_inputs};
+use crate::nn::model::{
+    network_inputs, rotational_from_si, scale_rotational, scale_translational, shape_inputs, StrainTarget,
+};
 use crate::nn::NnError;
 use crate::shape::{Shape, ShapeSampler, BOUNDS};
 use crate::stokes::{solve_shape, ShapeResistance, StokesError, StokesOptions};
@@ -77,6 +79,44 @@ pub struct Record {
     pub paper_rotational_torque: f64,
     /// Wall time of the solve \[s\].
     pub seconds: f64,
+    /// Body panels along the meridian of this solve (absent: the file header's `n_beta`; thin
+    /// shapes are solved finer, [`Refinement`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub n_beta: Option<usize>,
+}
+
+impl Record {
+    /// The resolution of this solve (`base`: the file header's `n_beta`).
+    pub fn n_beta_or(&self, base: usize) -> usize {
+        self.n_beta.unwrap_or(base)
+    }
+}
+
+/// A finer resolution for thin shapes: a shape whose aspect max(Lx, Lz) / Ly is at least
+/// `min_aspect` is solved with `n_beta` body panels along its meridian (the finest matching rule
+/// wins; never coarser than the base options). The shape factor B = c_s / c_r of thin platelets
+/// converges slowest: at Lx/Ly = 20 its Jeffery period is 1.5 % off at `n_beta` 16, 0.2 % at 24
+/// and 0.03 % at 32 (`examples/shape_factor_convergence.rs`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Refinement {
+    /// Smallest aspect max(Lx, Lz) / Ly the rule applies to (> 1).
+    pub min_aspect: f64,
+    /// Body panels along the meridian (even, 4 ..= 64).
+    pub n_beta: usize,
+}
+
+impl Refinement {
+    /// The default rules: `n_beta` 24 from aspect 9, 32 from aspect 15 (README, "Training data").
+    pub fn defaults() -> Vec<Refinement> {
+        vec![Refinement { min_aspect: 9.0, n_beta: 24 }, Refinement { min_aspect: 15.0, n_beta: 32 }]
+    }
+
+    /// The resolution of `shape` under `rules` with base resolution `base`.
+    pub fn n_beta_for(rules: &[Refinement], base: usize, shape: &Shape) -> usize {
+        let aspect = shape.lx.max(shape.lz) / shape.ly;
+        rules.iter().filter(|r| aspect >= r.min_aspect).map(|r| r.n_beta).fold(base, usize::max)
+    }
 }
 
 /// Errors of the data generator.
@@ -116,11 +156,23 @@ pub struct GenerateOptions {
     pub threads: usize,
     /// Solver options (the paper's configuration by default).
     pub stokes: StokesOptions,
+    /// Finer resolutions for thin shapes ([`Refinement::defaults`]). Not part of the file's
+    /// header: a record solved coarser than the rules ask is solved again and appended, the
+    /// finest record of a shape counts.
+    #[serde(default = "Refinement::defaults")]
+    pub refine: Vec<Refinement>,
 }
 
 impl Default for GenerateOptions {
     fn default() -> Self {
-        GenerateOptions { n_shapes: 2000, n_generalisation: 250, seed: 1, threads: 1, stokes: StokesOptions::default() }
+        GenerateOptions {
+            n_shapes: 2000,
+            n_generalisation: 250,
+            seed: 1,
+            threads: 1,
+            stokes: StokesOptions::default(),
+            refine: Refinement::defaults(),
+        }
     }
 }
 
@@ -231,6 +283,21 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
         return Err(DataError::Option { field: "threads", value: opts.threads.to_string(), allowed: "1 ..= 256" });
     }
     opts.stokes.validate().map_err(|source| DataError::Solve { set: Set::InBounds, index: 0, source })?;
+    for r in &opts.refine {
+        if !(r.min_aspect.is_finite() && r.min_aspect > 1.0) {
+            return Err(DataError::Option {
+                field: "refine.min_aspect",
+                value: r.min_aspect.to_string(),
+                allowed: "> 1",
+            });
+        }
+        StokesOptions { n_beta: r.n_beta, ..opts.stokes }.validate().map_err(|source| DataError::Solve {
+            set: Set::InBounds,
+            index: 0,
+            source,
+        })?;
+    }
+    let base = opts.stokes.n_beta;
     let p = path.display().to_string();
     let io = |source| DataError::Io { path: p.clone(), source };
     let wanted = FileHeader { format: FORMAT.into(), seed: opts.seed, stokes: opts.stokes };
@@ -245,7 +312,7 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
                     wanted: serde_json::to_string(&wanted).unwrap_or_default(),
                 });
             }
-            for r in records {
+            for r in finest(records, base) {
                 done.insert((r.set, r.index), r);
             }
             let f = std::fs::OpenOptions::new().write(true).open(path).map_err(io)?;
@@ -266,7 +333,12 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
     let todo: Vec<(Set, u64)> = (0..opts.n_shapes)
         .map(|i| (Set::InBounds, i))
         .chain((0..opts.n_generalisation).map(|i| (Set::Generalisation, i)))
-        .filter(|k| !done.contains_key(k))
+        .filter(|&(set, index)| match done.get(&(set, index)) {
+            Some(r) => {
+                r.n_beta_or(base) < Refinement::n_beta_for(&opts.refine, base, &draw_shape(opts.seed, set, index))
+            }
+            None => true,
+        })
         .collect();
     let total = todo.len() as u64;
     let writer = Mutex::new((file, 0u64));
@@ -278,9 +350,10 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
         todo.par_iter()
             .map(|&(set, index)| {
                 let shape = draw_shape(opts.seed, set, index);
+                let n_beta = Refinement::n_beta_for(&opts.refine, base, &shape);
                 let t0 = std::time::Instant::now();
-                let resistance =
-                    solve_shape(&shape, &opts.stokes).map_err(|source| DataError::Solve { set, index, source })?;
+                let resistance = solve_shape(&shape, &StokesOptions { n_beta, ..opts.stokes })
+                    .map_err(|source| DataError::Solve { set, index, source })?;
                 let record = Record {
                     set,
                     index,
@@ -288,6 +361,7 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
                     resistance,
                     paper_rotational_torque: resistance.paper_rotational_torque(),
                     seconds: t0.elapsed().as_secs_f64(),
+                    n_beta: Some(n_beta),
                 };
                 let line = serde_json::to_string(&record).map_err(|e| io(std::io::Error::other(e)))?;
                 let mut w = writer.lock().unwrap_or_else(|e| e.into_inner());
@@ -301,7 +375,11 @@ pub fn generate(path: &Path, opts: &GenerateOptions, progress: Progress<'_>) -> 
     for r in solved? {
         done.insert((r.set, r.index), r);
     }
-    Ok(done.into_values().filter(|r| r.index < set_size(opts, r.set)).collect())
+    Ok(done
+        .into_values()
+        .filter(|r| r.index < set_size(opts, r.set))
+        .map(|r| Record { n_beta: Some(r.n_beta_or(base)), ..r })
+        .collect())
 }
 
 fn set_size(opts: &GenerateOptions, set: Set) -> u64 {
@@ -311,10 +389,26 @@ fn set_size(opts: &GenerateOptions, set: Set) -> u64 {
     }
 }
 
-/// Reads all records of a data file (sorted by set and index).
+/// One record per shape: the finest solve (the last of equal resolution), in (set, index) order.
+fn finest(records: Vec<Record>, base: usize) -> Vec<Record> {
+    let mut best: BTreeMap<(Set, u64), Record> = BTreeMap::new();
+    for r in records {
+        let key = (r.set, r.index);
+        if best.get(&key).is_none_or(|b| r.n_beta_or(base) >= b.n_beta_or(base)) {
+            best.insert(key, r);
+        }
+    }
+    best.into_values().collect()
+}
+
+/// Reads all records of a data file (sorted by set and index; of a shape solved more than once,
+/// the finest solve), each with its `n_beta` filled in.
 pub fn load(path: &Path) -> Result<Vec<Record>, DataError> {
     let mut r = match read_file(path)? {
-        Some((_, r, _)) => r,
+        Some((h, r, _)) => {
+            let base = h.stokes.n_beta;
+            finest(r, base).into_iter().map(|r| Record { n_beta: Some(r.n_beta_or(base)), ..r }).collect::<Vec<_>>()
+        }
         None => {
             return Err(DataError::Io {
                 path: path.display().to_string(),
@@ -415,4 +509,15 @@ pub fn network_datasets(records: &[&Record], angles: usize, seed: u64) -> Result
         n_r: Dataset::new(5, 1, xr.clone(), yr)?,
         n_s: Dataset::new(5, 1, xr, ys)?,
     })
+}
+
+/// N_s's data set for `target` ([`StrainTarget`]): inputs as N_r's, one sample per record.
+pub fn strain_dataset(records: &[&Record], target: StrainTarget) -> Result<Dataset, DataError> {
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for r in records {
+        let [t_r, t_s] = rotational_from_si(&r.resistance.rotational());
+        x.extend_from_slice(&shape_inputs(&r.shape));
+        y.push(target.target(&r.shape, scale_rotational(t_r), scale_rotational(t_s))?);
+    }
+    Ok(Dataset::new(5, 1, x, y)?)
 }

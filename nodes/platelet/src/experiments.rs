@@ -178,3 +178,35 @@ pub fn rotation_period(t: &[f64], phi: &[f64]) -> Option<f64> {
 pub fn jeffery_period(shear_rate: f64, b: f64) -> f64 {
     4.0 * PI / (shear_rate.abs() * (1.0 - b * b).sqrt())
 }
+
+/// How well a model's shape factor B = c_s / c_r sets a platelet's rotation in simple shear,
+/// against a reference B (the converged solver, or Jeffery's closed form).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RotationError {
+    /// Aspect max(Lx, Lz) / Ly of the shape.
+    pub aspect: f64,
+    /// |T / T_ref − 1| of Jeffery's period 4π / (γ̇ √(1 − B²)).
+    pub period: f64,
+    /// The largest |Ω / Ω_ref − 1| over all orientations φ of Ω(φ) = −γ̇/2 (1 − B cos 2φ):
+    /// |B − B_ref| / (1 − |B_ref|), at the flow-aligned orientation where the platelet turns slowest.
+    pub omega: f64,
+}
+
+/// The rotation errors of `model`'s shape factor on `shapes` against the reference `b_ref`.
+pub fn rotation_errors(model: &dyn CoefficientModel, shapes: &[Shape], b_ref: &[f64]) -> Vec<RotationError> {
+    let mut rot = vec![Rotational::default(); shapes.len()];
+    model.rotational(shapes, &mut rot);
+    shapes
+        .iter()
+        .zip(&rot)
+        .zip(b_ref)
+        .map(|((s, r), &b0)| {
+            let b = r.c_s / r.c_r;
+            RotationError {
+                aspect: s.lx.max(s.lz) / s.ly,
+                period: (jeffery_period(1.0, b) / jeffery_period(1.0, b0) - 1.0).abs(),
+                omega: (b - b0).abs() / (1.0 - b0.abs()),
+            }
+        })
+        .collect()
+}

@@ -2,8 +2,10 @@
 use std::io::Write;
 
 use sonoflow_platelet::dataset::{
-    draw_shape, generate, load, network_datasets, GenerateOptions, Set, GENERALISATION_LIMITS,
+    draw_shape, generate, load, network_datasets, strain_dataset, GenerateOptions, Refinement, Set,
+    GENERALISATION_LIMITS,
 };
+use sonoflow_platelet::nn::model::StrainTarget;
 use sonoflow_platelet::nn::model::{eq18_factors, rotational_from_si, translational_from_si};
 use sonoflow_platelet::shape::BOUNDS;
 use sonoflow_platelet::{Outer, StokesOptions};
@@ -16,6 +18,7 @@ fn quick() -> GenerateOptions {
         seed: 7,
         threads: 2,
         stokes: StokesOptions { n_beta: 6, outer: Outer::FreeSpace, ..StokesOptions::default() },
+        refine: Vec::new(),
     }
 }
 
@@ -155,4 +158,78 @@ fn platelet_mirrors_are_symmetries_of_the_solved_targets() {
             assert!((a[k] - b[k]).abs() < 1e-12 * a[k].abs(), "{s:?}: {a:?} vs {b:?}");
         }
     }
+}
+
+#[test]
+fn thin_shapes_are_solved_finer_and_a_finer_rule_resolves_only_them() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("d.jsonl");
+    let base = quick();
+    let noop = |_: u64, _: u64| {};
+    let coarse = generate(&path, &base, &noop).expect("generate");
+    assert!(coarse.iter().all(|r| r.n_beta == Some(6)), "every record says its resolution");
+    // a rule between the shapes' aspects: the thinner ones are solved again at 8, once
+    let aspect = |r: &sonoflow_platelet::dataset::Record| r.shape.lx.max(r.shape.lz) / r.shape.ly;
+    let mut aspects: Vec<f64> = coarse.iter().map(aspect).collect();
+    aspects.sort_by(f64::total_cmp);
+    let cut = 0.5 * (aspects[2] + aspects[3]);
+    let rule = GenerateOptions { refine: vec![Refinement { min_aspect: cut, n_beta: 8 }], ..base.clone() };
+    let solved = std::sync::atomic::AtomicU64::new(0);
+    let count = |_: u64, total: u64| solved.store(total, std::sync::atomic::Ordering::Relaxed);
+    let fine = generate(&path, &rule, &count).expect("refine");
+    assert_eq!(solved.load(std::sync::atomic::Ordering::Relaxed), 3, "the three shapes above the cut");
+    for (c, f) in coarse.iter().zip(&fine) {
+        assert_eq!((c.set, c.index), (f.set, f.index));
+        let want = if aspect(c) >= cut { 8 } else { 6 };
+        assert_eq!(f.n_beta, Some(want), "aspect {}", aspect(c));
+        if want == 8 {
+            assert_ne!(c.resistance.rotation_torque, f.resistance.rotation_torque, "solved again");
+        } else {
+            assert_eq!(c, f, "kept as it was");
+        }
+    }
+    // nothing lost: the coarse lines stay in the file, the finest counts on loading
+    let text = std::fs::read_to_string(&path).expect("read");
+    assert_eq!(text.lines().count(), 1 + 6 + 3);
+    assert_eq!(load(&path).expect("load"), fine);
+    // and a rerun with the same rule solves nothing
+    solved.store(99, std::sync::atomic::Ordering::Relaxed);
+    generate(&path, &rule, &count).expect("rerun");
+    assert_eq!(solved.load(std::sync::atomic::Ordering::Relaxed), 99, "no progress call: nothing to solve");
+    // bad rules are named
+    let bad = GenerateOptions { refine: vec![Refinement { min_aspect: 0.5, n_beta: 8 }], ..base.clone() };
+    let e = generate(&path, &bad, &noop).unwrap_err();
+    assert!(e.to_string().contains("refine.min_aspect"), "{e}");
+    let bad = GenerateOptions { refine: vec![Refinement { min_aspect: 2.0, n_beta: 7 }], ..base };
+    let e = generate(&path, &bad, &noop).unwrap_err();
+    assert!(e.to_string().contains("n_beta"), "{e}");
+}
+
+#[test]
+fn shape_factor_targets_invert_to_the_strain_torque() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("d.jsonl");
+    let records = generate(&path, &quick(), &|_, _| {}).expect("generate");
+    let refs: Vec<&_> = records.iter().collect();
+    for target in StrainTarget::ALL {
+        let d = strain_dataset(&refs, target).expect("targets");
+        assert_eq!(d.len(), records.len());
+        for (k, r) in records.iter().enumerate() {
+            let [t_r, t_s] = rotational_from_si(&r.resistance.rotational());
+            let (t_r, t_s) = (t_r / 800.0, t_s / 800.0);
+            let back = target.strain_torque(&r.shape, t_r, d.targets()[k]);
+            assert!((back - t_s).abs() < 1e-12 * t_r, "{target:?}: {back} vs {t_s}");
+            if target == StrainTarget::ShapeFactor {
+                // ln((1 − B)/(1 − B_e)) with B_e = (Lx² − Ly²)/(Lx² + Ly²)
+                let (x2, y2) = (r.shape.lx.powi(2), r.shape.ly.powi(2));
+                let want = (1.0 - t_s / t_r).ln() - (2.0 * y2 / (x2 + y2)).ln();
+                assert!((d.targets()[k] - want).abs() < 1e-12, "{} vs {want}", d.targets()[k]);
+            }
+        }
+    }
+    // B ≥ 1 has no log target
+    let s = records[0].shape;
+    assert!(StrainTarget::ShapeFactor.target(&s, 1.0, 1.0).is_err());
+    assert!(StrainTarget::LogOneMinusB.target(&s, -1.0, -2.0).is_err());
+    assert_eq!(StrainTarget::StrainTorque.target(&s, 1.0, 1.5).expect("t_s itself"), 1.5);
 }

@@ -4,10 +4,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use sonoflow_platelet::dataset::{self, GenerateOptions, Record, Set};
+use sonoflow_platelet::dataset::{self, GenerateOptions, Record, Refinement, Set};
 use sonoflow_platelet::nn::data::{evaluate, SetErrors, TrainingReport};
 use sonoflow_platelet::nn::mlp::Mirror;
-use sonoflow_platelet::nn::model::NetworkModel;
+use sonoflow_platelet::nn::model::{NetworkModel, StrainTarget};
 use sonoflow_platelet::nn::train::TrainConfig;
 use sonoflow_platelet::stokes::{Outer, StokesOptions, PAPER_BALL_RADIUS};
 
@@ -67,6 +67,35 @@ pub struct DataArgs {
     /// Free space instead of the paper's 50 µm ball.
     #[arg(long)]
     pub free_space: bool,
+    /// Finer resolutions for thin shapes: comma-separated ASPECT:N_BETA rules (a shape with
+    /// max(Lx, Lz) / Ly ≥ ASPECT is solved with N_BETA; the finest matching rule wins), or
+    /// `none`. Shapes of an existing file solved coarser than the rules ask are solved again.
+    #[arg(long, default_value = "9:24,15:32", value_parser = parse_refine)]
+    pub refine: RefineRules,
+}
+
+/// `--refine` rules.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RefineRules(pub Vec<Refinement>);
+
+fn parse_refine(s: &str) -> Result<RefineRules, String> {
+    if s.trim() == "none" {
+        return Ok(RefineRules(Vec::new()));
+    }
+    let mut rules = Vec::new();
+    for part in s.split(',').map(str::trim) {
+        let (a, n) = part.split_once(':').ok_or_else(|| format!("`{part}`: expected ASPECT:N_BETA, e.g. 9:24"))?;
+        let min_aspect: f64 = a.trim().parse().map_err(|_| format!("`{a}` is not a number (ASPECT > 1)"))?;
+        let n_beta: usize = n.trim().parse().map_err(|_| format!("`{n}` is not an even integer in 4 ..= 64"))?;
+        if !(min_aspect.is_finite() && min_aspect > 1.0) {
+            return Err(format!("ASPECT = {min_aspect}: allowed > 1"));
+        }
+        if n_beta % 2 != 0 || !(4..=64).contains(&n_beta) {
+            return Err(format!("N_BETA = {n_beta}: allowed an even integer in 4 ..= 64"));
+        }
+        rules.push(Refinement { min_aspect, n_beta });
+    }
+    Ok(RefineRules(rules))
 }
 
 /// Arguments of `sonoflow platelet train`.
@@ -119,6 +148,40 @@ pub struct TrainArgs {
     /// Full-batch L-BFGS iterations after Adam (0: none).
     #[arg(long, default_value_t = 0)]
     pub refine: usize,
+    /// What N_s predicts: `shape-factor` ln((1 − B)/(1 − B_e)) relative to the ellipsoid with the
+    /// same in-plane axes, `log-one-minus-b` ln(1 − B), or `strain-torque` t_s (the first
+    /// networks). B = c_s / c_r sets the tumbling period; see the crate README.
+    #[arg(long, value_enum, default_value_t = StrainTargetArg::ShapeFactor)]
+    pub strain_target: StrainTargetArg,
+}
+
+/// `--strain-target`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StrainTargetArg {
+    /// ln((1 − B)/(1 − B_e)).
+    ShapeFactor,
+    /// ln(1 − B).
+    LogOneMinusB,
+    /// t_s = T_s / 800.
+    StrainTorque,
+}
+
+impl StrainTargetArg {
+    fn target(self) -> StrainTarget {
+        match self {
+            StrainTargetArg::ShapeFactor => StrainTarget::ShapeFactor,
+            StrainTargetArg::LogOneMinusB => StrainTarget::LogOneMinusB,
+            StrainTargetArg::StrainTorque => StrainTarget::StrainTorque,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            StrainTargetArg::ShapeFactor => "shape-factor",
+            StrainTargetArg::LogOneMinusB => "log-one-minus-b",
+            StrainTargetArg::StrainTorque => "strain-torque",
+        }
+    }
 }
 
 /// Loss weights of N's three outputs (d, l, t_p).
@@ -190,8 +253,14 @@ fn data(a: &DataArgs) -> anyhow::Result<i32> {
         },
         ..defaults
     };
-    let opts =
-        GenerateOptions { n_shapes: a.shapes, n_generalisation: a.generalisation, seed: a.seed, threads, stokes };
+    let opts = GenerateOptions {
+        n_shapes: a.shapes,
+        n_generalisation: a.generalisation,
+        seed: a.seed,
+        threads,
+        stokes,
+        refine: a.refine.0.clone(),
+    };
     let t0 = Instant::now();
     let last = std::sync::Mutex::new(Instant::now());
     let progress = |done: u64, total: u64| {
@@ -263,18 +332,45 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
     let dtr = dataset::network_datasets(&training, a.angles, a.seed)?;
     let dte = dataset::network_datasets(&test, a.angles, a.seed)?;
     let dg = if gen.is_empty() { None } else { Some(dataset::network_datasets(&gen, a.angles, a.seed)?) };
+    let target = a.strain_target.target();
+    let s_name = match target {
+        StrainTarget::StrainTorque => "strain torque t_s".to_string(),
+        t => format!("shape factor {}", t.output_name()),
+    };
+    // N_s's data sets for the chosen target (t_s: as built with N_r's)
+    let strain = |rs: &[&Record]| dataset::strain_dataset(rs, target);
+    let s_sets = [strain(&training)?, strain(&test)?, if gen.is_empty() { strain(&training)? } else { strain(&gen)? }];
     let t0 = Instant::now();
     let mut reports: Vec<TrainingReport> = Vec::new();
     let mut nets = Vec::new();
-    type Pick = fn(&dataset::NetworkData) -> &sonoflow_platelet::nn::data::Dataset;
-    /// Name, layer sizes, output names, its data, its training configuration.
-    type NetSpec<'a> = (&'a str, Vec<usize>, Vec<&'a str>, Pick, &'a TrainConfig);
+    use sonoflow_platelet::nn::data::Dataset;
+    /// Name, layer sizes, output names, its data (training, test, generalisation), its training configuration.
+    type NetSpec<'a> = (&'a str, Vec<usize>, Vec<&'a str>, [Option<&'a Dataset>; 3], &'a TrainConfig);
     let nets_spec: [NetSpec; 3] = [
-        ("N", vec![6, 50, 20, 20, 3], vec!["drag d", "lift l", "pitching torque t_p"], |d| &d.n, &n_cfg),
-        ("N_r", vec![5, 20, 20, 20, 1], vec!["rotational torque t_r"], |d| &d.n_r, &shape_cfg),
-        ("N_s", vec![5, 20, 20, 20, 1], vec!["strain torque t_s"], |d| &d.n_s, &shape_cfg),
+        (
+            "N",
+            vec![6, 50, 20, 20, 3],
+            vec!["drag d", "lift l", "pitching torque t_p"],
+            [Some(&dtr.n), Some(&dte.n), dg.as_ref().map(|g| &g.n)],
+            &n_cfg,
+        ),
+        (
+            "N_r",
+            vec![5, 20, 20, 20, 1],
+            vec!["rotational torque t_r"],
+            [Some(&dtr.n_r), Some(&dte.n_r), dg.as_ref().map(|g| &g.n_r)],
+            &shape_cfg,
+        ),
+        (
+            "N_s",
+            vec![5, 20, 20, 20, 1],
+            vec![s_name.as_str()],
+            [Some(&s_sets[0]), Some(&s_sets[1]), dg.as_ref().map(|_| &s_sets[2])],
+            &shape_cfg,
+        ),
     ];
-    for (name, sizes, outputs, pick, cfg) in nets_spec {
+    for (name, sizes, outputs, [d_train, d_test, d_gen], cfg) in nets_spec {
+        let (Some(d_train), Some(d_test)) = (d_train, d_test) else { anyhow::bail!("internal: no training data") };
         let t = Instant::now();
         // `restarts` trainings from different initial weights and shuffles (the shape split stays
         // the same); the one with the lowest validation loss (part of the training shapes, never
@@ -282,7 +378,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
         let mut best: Option<(sonoflow_platelet::nn::mlp::Mlp, sonoflow_platelet::nn::train::TrainOutcome)> = None;
         for r in 0..a.restarts {
             let c = TrainConfig { seed: cfg.seed.wrapping_add(1000 * r as u64), ..cfg.clone() };
-            let (net, outcome) = sonoflow_platelet::nn::train::train(&sizes, pick(&dtr), &c)?;
+            let (net, outcome) = sonoflow_platelet::nn::train::train(&sizes, d_train, &c)?;
             eprintln!("platelet train: {name} restart {r}: validation MSE {:.3e}", outcome.best_validation_loss);
             if best.as_ref().is_none_or(|(_, o)| outcome.best_validation_loss < o.best_validation_loss) {
                 best = Some((net, outcome));
@@ -290,15 +386,11 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
         }
         let Some((net, outcome)) = best else { anyhow::bail!("--restarts must be at least 1") };
         let mut sets = vec![
-            SetErrors { set: "training".into(), n: pick(&dtr).len(), per_output: evaluate(&net, pick(&dtr))? },
-            SetErrors { set: "test".into(), n: pick(&dte).len(), per_output: evaluate(&net, pick(&dte))? },
+            SetErrors { set: "training".into(), n: d_train.len(), per_output: evaluate(&net, d_train)? },
+            SetErrors { set: "test".into(), n: d_test.len(), per_output: evaluate(&net, d_test)? },
         ];
-        if let Some(g) = &dg {
-            sets.push(SetErrors {
-                set: "generalisation".into(),
-                n: pick(g).len(),
-                per_output: evaluate(&net, pick(g))?,
-            });
+        if let Some(g) = d_gen {
+            sets.push(SetErrors { set: "generalisation".into(), n: g.len(), per_output: evaluate(&net, g)? });
         }
         eprintln!(
             "platelet train: {name} trained in {:.1} s ({} epochs)",
@@ -319,13 +411,56 @@ fn train(a: &TrainArgs) -> anyhow::Result<i32> {
         (Some(a), Some(b), Some(c)) => (a, b, c),
         _ => anyhow::bail!("internal: three networks expected"),
     };
-    let model = NetworkModel::new(n, n_r, n_s)?;
+    let model = NetworkModel::new(n, n_r, n_s)?.with_strain_target(target);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     model.save_dir(&a.out)?;
     let secs = t0.elapsed().as_secs_f64();
-    write_report(&a.out, &a.data, &records, &reports, a, secs)?;
+    let rotation = rotation_table(&model, &[("training", &training), ("test", &test), ("generalisation", &gen)]);
+    write_report(&a.out, &a.data, &records, &reports, &rotation, a, secs)?;
     println!("weights and training report in {} ({secs:.0} s of training)", a.out.display());
     Ok(0)
+}
+
+/// Aspect classes of the rotation table (max(Lx, Lz) / Ly).
+const ASPECT_CLASSES: [(f64, f64); 4] = [(0.0, 6.0), (6.0, 10.0), (10.0, 17.0), (17.0, f64::INFINITY)];
+
+/// The rotation the networks give (Jeffery period and slowest angular velocity from B = c_s / c_r)
+/// against the data's (the converged solver's) B, per set and aspect class, as markdown.
+fn rotation_table(model: &NetworkModel, sets: &[(&str, &[&Record])]) -> String {
+    use sonoflow_platelet::experiments::rotation_errors;
+    use std::fmt::Write as _;
+    let mut md = String::from(
+        "Rotation in simple shear from the networks' shape factor B = c_s / c_r against the data's (the solver's, at each shape's resolution): Jeffery's period 4π / (γ̇ √(1 − B²)) and the slowest angular velocity γ̇ (1 − B) / 2 (the largest error over all orientations), |error| in %, mean / max, by aspect max(Lx, Lz) / Ly:\n\n| set | aspect | shapes | period avg | period max | Ω avg | Ω max |\n|---|---|---:|---:|---:|---:|---:|\n",
+    );
+    for (name, recs) in sets {
+        if recs.is_empty() {
+            continue;
+        }
+        let shapes: Vec<_> = recs.iter().map(|r| r.shape).collect();
+        let b: Vec<f64> = recs.iter().map(|r| r.resistance.strain_torque / r.resistance.rotation_torque).collect();
+        let errs = rotation_errors(model, &shapes, &b);
+        let classes = ASPECT_CLASSES.iter().map(|&(lo, hi)| (format!("{lo:.0}–{hi:.0}").replace("–inf", "+"), lo, hi));
+        for (label, lo, hi) in std::iter::once(("all".to_string(), 0.0, f64::INFINITY)).chain(classes) {
+            let e: Vec<_> = errs.iter().filter(|e| e.aspect >= lo && e.aspect < hi).collect();
+            if e.is_empty() {
+                continue;
+            }
+            let k = e.len() as f64;
+            let (pa, pm) =
+                (e.iter().map(|e| e.period).sum::<f64>() / k, e.iter().map(|e| e.period).fold(0.0, f64::max));
+            let (oa, om) = (e.iter().map(|e| e.omega).sum::<f64>() / k, e.iter().map(|e| e.omega).fold(0.0, f64::max));
+            let _ = writeln!(
+                md,
+                "| {name} | {label} | {} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                e.len(),
+                100.0 * pa,
+                100.0 * pm,
+                100.0 * oa,
+                100.0 * om
+            );
+        }
+    }
+    md
 }
 
 fn write_report(
@@ -333,12 +468,13 @@ fn write_report(
     data: &Path,
     records: &[Record],
     reports: &[TrainingReport],
+    rotation: &str,
     a: &TrainArgs,
     secs: f64,
 ) -> anyhow::Result<()> {
     let (inb, gen) = split(records);
     let mut md = format!(
-        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}; {} epoch(s) at most, {} restart(s) per network (kept: the lowest validation loss). Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nRecipe: Adam, batch {}, cosine step {:e} → {:e}, validation {} of the training shapes; mirror symmetry: {}; loss weights of N (d, l, t_p): {}; L-BFGS refinement: {} iteration(s).\n\nReproduce: `sonoflow platelet train --data {} --out {} --epochs {} --patience {} --restarts {} --seed {} --batch-size {} --learning-rate {} --final-learning-rate {} --validation-fraction {} --mirror {} --n-output-weights {} --refine {}`.\n\n",
+        "# Platelet networks: training report\n\nData: `{}` — {} in-bounds shapes (eq 7) × {} angles of attack for N, {} generalisation shapes (a parameter outside eq 7). Split {:.0}/{:.0} % (training/test) by shape, seed {}; {} epoch(s) at most, {} restart(s) per network (kept: the lowest validation loss). Training: {:.0} s on this machine.\n\nErrors: relative errors of the eq 18-scaled outputs, |ŷ − y| / |y|, in %: mean (avg) and maximum, as in paper 2's Table 1. The second table divides by the RMS of |y| over the set instead (for outputs that can be near zero, e.g. the pitching torque of symmetric platelets).\n\nRecipe: Adam, batch {}, cosine step {:e} → {:e}, validation {} of the training shapes; mirror symmetry: {}; loss weights of N (d, l, t_p): {}; L-BFGS refinement: {} iteration(s); N_s predicts {}.\n\nReproduce: `sonoflow platelet train --data {} --out {} --epochs {} --patience {} --restarts {} --seed {} --batch-size {} --learning-rate {} --final-learning-rate {} --validation-fraction {} --mirror {} --n-output-weights {} --refine {} --strain-target {}`.\n\n",
         data.display(),
         inb.len(),
         a.angles,
@@ -360,6 +496,7 @@ fn write_report(
         },
         a.n_output_weights,
         a.refine,
+        a.strain_target.target().output_name(),
         data.display(),
         out.display(),
         a.epochs,
@@ -372,12 +509,14 @@ fn write_report(
         a.validation_fraction,
         a.mirror.name(),
         a.n_output_weights,
-        a.refine
+        a.refine,
+        a.strain_target.name()
     );
     for r in reports {
         md.push_str(&r.to_markdown());
         md.push('\n');
     }
+    md.push_str(rotation);
     std::fs::write(out.join("training-report.md"), md).with_context(|| format!("writing {}", out.display()))?;
     let json = serde_json::to_string_pretty(reports)?;
     std::fs::write(out.join("training-report.json"), json).with_context(|| format!("writing {}", out.display()))?;
@@ -554,6 +693,9 @@ mod tests {
             train_args(&["--mirror", "augment", "--n-output-weights", "1, 1,2.5", "--refine", "30"]).expect("valid");
         assert_eq!((a.mirror, a.n_output_weights, a.refine), (MirrorUse::Augment, OutputWeights([1.0, 1.0, 2.5]), 30));
         assert_eq!(a.n_output_weights.to_string(), "1,1,2.5");
+        assert_eq!(a.strain_target, StrainTargetArg::ShapeFactor);
+        let a = train_args(&["--strain-target", "strain-torque"]).expect("valid");
+        assert_eq!(a.strain_target.target(), StrainTarget::StrainTorque);
         for (args, needle) in [
             (&["--mirror", "sideways"][..], "sideways"),
             (&["--n-output-weights", "1,2"], "three comma-separated"),
@@ -561,9 +703,41 @@ mod tests {
             (&["--n-output-weights", "1,-1,2"], ">= 0"),
             (&["--n-output-weights", "0,0,0"], "not all 0"),
             (&["--refine", "many"], "--refine"),
+            (&["--strain-target", "b"], "--strain-target"),
         ] {
             let e = train_args(args).expect_err("invalid");
             assert!(e.contains(needle), "{args:?}: {e}");
+        }
+    }
+
+    fn data_args(extra: &[&str]) -> Result<DataArgs, String> {
+        let mut argv = vec!["platelet", "data"];
+        argv.extend_from_slice(extra);
+        match Cli::try_parse_from(argv) {
+            Ok(Cli { cmd: PlateletCmd::Data(a) }) => Ok(a),
+            Ok(other) => Err(format!("{other:?}")),
+            Err(e) => Err(e.to_string()),
+        }
+    }
+
+    #[test]
+    fn refinement_rules_parse_and_default_to_the_library_rules() {
+        assert_eq!(data_args(&[]).expect("defaults").refine.0, Refinement::defaults());
+        assert!(data_args(&["--refine", "none"]).expect("valid").refine.0.is_empty());
+        let a = data_args(&["--refine", "5:20, 12:40"]).expect("valid");
+        assert_eq!(
+            a.refine.0,
+            [Refinement { min_aspect: 5.0, n_beta: 20 }, Refinement { min_aspect: 12.0, n_beta: 40 }]
+        );
+        for (arg, needle) in [
+            ("12", "ASPECT:N_BETA"),
+            ("x:24", "`x` is not a number"),
+            ("0.5:24", "allowed > 1"),
+            ("9:23", "even integer"),
+            ("9:80", "even integer"),
+        ] {
+            let e = data_args(&["--refine", arg]).expect_err("invalid");
+            assert!(e.contains(needle), "{arg}: {e}");
         }
     }
 

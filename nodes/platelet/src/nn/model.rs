@@ -7,7 +7,7 @@
 //! ω = 2π rad/s.
 //!
 //! **Networks.** N: (Lx, Ly, Lz \[µm\], α_top, α_bot, ψ \[rad\]) → (d, l, t_p); N_r and N_s:
-//! (Lx, Ly, Lz \[µm\], α_top, α_bot) → t_r and t_s. ψ is reduced to [0, 2π), the range of the
+//! (Lx, Ly, Lz \[µm\], α_top, α_bot) → t_r and N_s's target (below: the shape factor's g). ψ is reduced to [0, 2π), the range of the
 //! training data (eq 14). A network stored with a mirror ([`super::mlp::Mirror`], the shipped
 //! ones) predicts the average over the platelet and its mirror image, at twice the cost.
 //!
@@ -24,6 +24,18 @@
 //! fixed body in the body-frame strain flow ε (y, x, 0) with ε = 2π s⁻¹ (E'_xy = ε), the rate of
 //! the rotational training flow; it is scaled like T_r: T_s = 800 t_s, c_s = T_s · 1e-21 N·m /
 //! (2π s⁻¹). For a thin disc c_s / c_r = B → 1 (Bretherton's shape factor), so t_s ≈ t_r = O(1).
+//!
+//! **Shape factor** ([`StrainTarget`]). How a platelet tumbles in shear hangs on 1 − B, not on
+//! t_s: Jeffery's period 4π / (γ̇ √(1 − B²)) moves by about B δB / (1 − B²), r²/4 times δB / B for
+//! an ellipsoid of aspect r (r = 20: 100 ×), and the slowest angular velocity, at the
+//! flow-aligned orientation, is γ̇ (1 − B) / 2. A network predicting t_s to 0.03 % still gets the
+//! period of a thin platelet wrong by several per cent. The shipped N_s therefore predicts
+//! g = ln((1 − B) / (1 − B_e)), the log of 1 − B relative to that of the ellipsoid with the same
+//! in-plane axes (B_e = (Lx² − Ly²)/(Lx² + Ly²), Jeffery 1922): an absolute error δg is a
+//! relative error δg of 1 − B, i.e. about δg / 2 of the period and δg of the slowest rotation,
+//! for every aspect ratio. c_s = c_r (1 − (1 − B_e) e^g) with c_r from N_r. `t_s` (the first
+//! networks) and plain ln(1 − B) are kept as choices (`sonoflow platelet train --strain-target`);
+//! the weights carry the choice in their metadata.
 
 use super::mlp::{with_thread_workspace, Mlp, MlpWorkspace};
 use super::NnError;
@@ -86,6 +98,74 @@ pub fn scale_rotational(raw: f64) -> f64 {
     raw / T_R_SCALE
 }
 
+/// What N_s predicts (module doc, "Shape factor").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StrainTarget {
+    /// t_s = T_s / 800, scaled like t_r (the first shipped networks).
+    StrainTorque,
+    /// g = ln((1 − B) / (1 − B_e)): B = c_s / c_r, B_e = (Lx² − Ly²)/(Lx² + Ly²) Jeffery's B of
+    /// the ellipsoid with the platelet's in-plane axes (the default).
+    ShapeFactor,
+    /// ln(1 − B) without the ellipsoid's part (an ablation).
+    LogOneMinusB,
+}
+
+impl StrainTarget {
+    /// Every target, in the order of the ablation tables.
+    pub const ALL: [StrainTarget; 3] =
+        [StrainTarget::ShapeFactor, StrainTarget::LogOneMinusB, StrainTarget::StrainTorque];
+
+    /// Name of N_s's output in the weights' metadata (`outputs`) and the reports.
+    pub fn output_name(self) -> &'static str {
+        match self {
+            StrainTarget::StrainTorque => "t_s",
+            StrainTarget::ShapeFactor => "ln((1-B)/(1-B_e))",
+            StrainTarget::LogOneMinusB => "ln(1-B)",
+        }
+    }
+
+    /// The target of [`StrainTarget::output_name`].
+    pub fn from_output_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|t| t.output_name() == name)
+    }
+
+    /// The training target from the shape and its (t_r, t_s) = (T_r, T_s) / 800. Fails unless
+    /// 0 < t_s < t_r for the log targets (B in (0, 1): every body the solver resolves).
+    pub fn target(self, shape: &Shape, t_r: f64, t_s: f64) -> Result<f64, NnError> {
+        if self == StrainTarget::StrainTorque {
+            return Ok(t_s);
+        }
+        if !(t_r.is_finite() && t_s.is_finite() && t_r > 0.0 && t_s < t_r) {
+            return Err(NnError::Config {
+                field: "rotational torques (t_r, t_s)",
+                value: format!("({t_r}, {t_s})"),
+                allowed: "t_s < t_r and t_r > 0 (a shape factor B = t_s / t_r below 1)",
+            });
+        }
+        let ln_1mb = ((t_r - t_s) / t_r).ln();
+        Ok(match self {
+            StrainTarget::ShapeFactor => ln_1mb - ellipsoid_one_minus_b(shape).ln(),
+            _ => ln_1mb,
+        })
+    }
+
+    /// t_s from the network's output `y` and t_r (the inverse of [`StrainTarget::target`]).
+    pub fn strain_torque(self, shape: &Shape, t_r: f64, y: f64) -> f64 {
+        match self {
+            StrainTarget::StrainTorque => y,
+            StrainTarget::ShapeFactor => t_r * (1.0 - ellipsoid_one_minus_b(shape) * y.exp()),
+            StrainTarget::LogOneMinusB => t_r * (1.0 - y.exp()),
+        }
+    }
+}
+
+/// 1 − B_e = 2 Ly² / (Lx² + Ly²) of the ellipsoid with the platelet's in-plane axes (Jeffery 1922:
+/// B_e = (Lx² − Ly²)/(Lx² + Ly²) for rotation about z; exact for α = 1 in free space).
+pub fn ellipsoid_one_minus_b(shape: &Shape) -> f64 {
+    let (x2, y2) = (shape.lx * shape.lx, shape.ly * shape.ly);
+    2.0 * y2 / (x2 + y2)
+}
+
 /// (D, L, T) in paper units at |δv| = 1 µm/s → SI coefficients (module doc).
 pub fn translational_to_si(raw: [f64; 3]) -> Translational {
     Translational {
@@ -130,6 +210,7 @@ pub struct NetworkModel {
     n: Mlp,
     n_r: Mlp,
     n_s: Mlp,
+    strain: StrainTarget,
     parallel: bool,
 }
 
@@ -145,12 +226,24 @@ fn expect_sizes(name: &str, net: &Mlp, n_in: usize, n_out: usize) -> Result<(), 
 }
 
 impl NetworkModel {
-    /// From N (6 → 3), N_r (5 → 1) and N_s (5 → 1); serial evaluation.
+    /// From N (6 → 3), N_r (5 → 1) and N_s (5 → 1, predicting t_s: see
+    /// [`NetworkModel::with_strain_target`]); serial evaluation.
     pub fn new(n: Mlp, n_r: Mlp, n_s: Mlp) -> Result<Self, NnError> {
         expect_sizes("N", &n, 6, 3)?;
         expect_sizes("N_r", &n_r, 5, 1)?;
         expect_sizes("N_s", &n_s, 5, 1)?;
-        Ok(NetworkModel { n, n_r, n_s, parallel: false })
+        Ok(NetworkModel { n, n_r, n_s, strain: StrainTarget::StrainTorque, parallel: false })
+    }
+
+    /// What N_s predicts.
+    pub fn with_strain_target(mut self, target: StrainTarget) -> Self {
+        self.strain = target;
+        self
+    }
+
+    /// What N_s predicts.
+    pub fn strain_target(&self) -> StrainTarget {
+        self.strain
     }
 
     /// Evaluates across rayon's threads (`true`) or on the caller's (`false`); same results.
@@ -168,15 +261,24 @@ impl NetworkModel {
     pub fn save_dir(&self, dir: &Path) -> Result<(), NnError> {
         self.n.save(&dir.join("n.safetensors"), &[("network", "N"), ("outputs", "d,l,t_p")])?;
         self.n_r.save(&dir.join("n_r.safetensors"), &[("network", "N_r"), ("outputs", "t_r")])?;
-        self.n_s.save(&dir.join("n_s.safetensors"), &[("network", "N_s"), ("outputs", "t_s")])
+        self.n_s.save(&dir.join("n_s.safetensors"), &[("network", "N_s"), ("outputs", self.strain.output_name())])
     }
 
-    /// Reads the three files [`NetworkModel::save_dir`] writes.
+    /// Reads the three files [`NetworkModel::save_dir`] writes; N_s's target from its `outputs`
+    /// metadata (absent: t_s).
     pub fn load_dir(dir: &Path) -> Result<Self, NnError> {
         let (n, _) = Mlp::load(&dir.join("n.safetensors"))?;
         let (n_r, _) = Mlp::load(&dir.join("n_r.safetensors"))?;
-        let (n_s, _) = Mlp::load(&dir.join("n_s.safetensors"))?;
-        Self::new(n, n_r, n_s)
+        let (n_s, meta) = Mlp::load(&dir.join("n_s.safetensors"))?;
+        let strain = match meta.get("outputs") {
+            None => StrainTarget::StrainTorque,
+            Some(name) => StrainTarget::from_output_name(name).ok_or_else(|| NnError::Config {
+                field: "n_s.safetensors: metadata `outputs`",
+                value: name.clone(),
+                allowed: "t_s, ln((1-B)/(1-B_e)) or ln(1-B)",
+            })?,
+        };
+        Ok(Self::new(n, n_r, n_s)?.with_strain_target(strain))
     }
 
     fn translational_chunk(&self, shapes: &[Shape], psi: &[f64], out: &mut [Translational], ws: &mut MlpWorkspace) {
@@ -201,10 +303,14 @@ impl NetworkModel {
                 *r = v as f32;
             }
         };
-        self.n_r.forward_with(shapes.len(), ws, fill, |i, row| out[i].c_r = unscale_rotational(row[0] as f64));
-        self.n_s.forward_with(shapes.len(), ws, fill, |i, row| out[i].c_s = unscale_rotational(row[0] as f64));
+        // t_r first (in c_r), then N_s's output (in c_s) turned into t_s with it
+        self.n_r.forward_with(shapes.len(), ws, fill, |i, row| out[i].c_r = row[0] as f64);
+        let strain = self.strain;
+        self.n_s.forward_with(shapes.len(), ws, fill, |i, row| {
+            out[i].c_s = strain.strain_torque(&shapes[i], out[i].c_r, row[0] as f64)
+        });
         for o in out.iter_mut() {
-            *o = rotational_to_si(o.c_r, o.c_s);
+            *o = rotational_to_si(unscale_rotational(o.c_r), unscale_rotational(o.c_s));
         }
     }
 }
@@ -408,5 +514,38 @@ mod tests {
         std::fs::remove_file(dir.path().join("n_s.safetensors")).expect("exists");
         let e = NetworkModel::load_dir(dir.path()).expect_err("missing file");
         assert!(e.to_string().contains("n_s.safetensors"), "{e}");
+    }
+
+    #[test]
+    fn shape_factor_target_sets_c_s_from_c_r_and_travels_with_the_weights() {
+        // N_s outputs g = 0.5 α_top + 0.25 α_bot; c_s = c_r (1 − (1 − B_e) e^g)
+        for target in StrainTarget::ALL {
+            let m = model().with_strain_target(target);
+            let dir = tempfile::tempdir().expect("temp dir");
+            m.save_dir(dir.path()).expect("writable");
+            let back = NetworkModel::load_dir(dir.path()).expect("valid files");
+            assert_eq!(back.strain_target(), target);
+            let shapes = [Shape::from_um(3.2, 0.6, 2.9, 1.3, 0.7), Shape::from_um(2.6, 0.3, 3.4, 0.4, 1.9)];
+            let mut rot = [Rotational::default(); 2];
+            back.rotational(&shapes, &mut rot);
+            for (s, r) in shapes.iter().zip(&rot) {
+                let t_r = 0.1 * s.lx * 1e6 + s.ly * 1e6 + 0.1 * s.lz * 1e6 + 0.2;
+                let g = 0.5 * s.alpha_top + 0.25 * s.alpha_bot;
+                let one_minus_be = 2.0 * s.ly * s.ly / (s.lx * s.lx + s.ly * s.ly);
+                let t_s = match target {
+                    StrainTarget::StrainTorque => g,
+                    StrainTarget::ShapeFactor => t_r * (1.0 - one_minus_be * g.exp()),
+                    StrainTarget::LogOneMinusB => t_r * (1.0 - g.exp()),
+                };
+                let want = 800.0 * t_s * 1e-21 / (2.0 * PI);
+                assert!((r.c_s - want).abs() < 1e-6 * want.abs(), "{target:?}: {} vs {want}", r.c_s);
+            }
+        }
+        // weights of an unknown target are refused, naming the field
+        let dir = tempfile::tempdir().expect("temp dir");
+        model().save_dir(dir.path()).expect("writable");
+        linear_5([0.0; 5], 0.0).save(&dir.path().join("n_s.safetensors"), &[("outputs", "B")]).expect("writable");
+        let e = NetworkModel::load_dir(dir.path()).expect_err("unknown target");
+        assert!(e.to_string().contains("outputs") && e.to_string().contains("ln(1-B)"), "{e}");
     }
 }
