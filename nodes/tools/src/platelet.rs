@@ -90,7 +90,7 @@ fn parse_refine(s: &str) -> Result<RefineRules, String> {
         if !(min_aspect.is_finite() && min_aspect > 1.0) {
             return Err(format!("ASPECT = {min_aspect}: allowed > 1"));
         }
-        if n_beta % 2 != 0 || !(4..=64).contains(&n_beta) {
+        if n_beta & 1 == 1 || !(4..=64).contains(&n_beta) {
             return Err(format!("N_BETA = {n_beta}: allowed an even integer in 4 ..= 64"));
         }
         rules.push(Refinement { min_aspect, n_beta });
@@ -673,13 +673,17 @@ mod tests {
         cmd: PlateletCmd,
     }
 
-    fn train_args(extra: &[&str]) -> Result<TrainArgs, String> {
-        let mut argv = vec!["platelet", "train"];
+    /// `platelet <sub> <extra…>` parsed.
+    fn parse(sub: &str, extra: &[&str]) -> Result<PlateletCmd, String> {
+        let mut argv = vec!["platelet", sub];
         argv.extend_from_slice(extra);
-        match Cli::try_parse_from(argv) {
-            Ok(Cli { cmd: PlateletCmd::Train(a) }) => Ok(a),
-            Ok(other) => Err(format!("{other:?}")),
-            Err(e) => Err(e.to_string()),
+        Cli::try_parse_from(argv).map(|c| c.cmd).map_err(|e| e.to_string())
+    }
+
+    fn train_args(extra: &[&str]) -> Result<TrainArgs, String> {
+        match parse("train", extra)? {
+            PlateletCmd::Train(a) => Ok(a),
+            other => Err(format!("{other:?}")),
         }
     }
 
@@ -711,12 +715,9 @@ mod tests {
     }
 
     fn data_args(extra: &[&str]) -> Result<DataArgs, String> {
-        let mut argv = vec!["platelet", "data"];
-        argv.extend_from_slice(extra);
-        match Cli::try_parse_from(argv) {
-            Ok(Cli { cmd: PlateletCmd::Data(a) }) => Ok(a),
-            Ok(other) => Err(format!("{other:?}")),
-            Err(e) => Err(e.to_string()),
+        match parse("data", extra)? {
+            PlateletCmd::Data(a) => Ok(a),
+            other => Err(format!("{other:?}")),
         }
     }
 
