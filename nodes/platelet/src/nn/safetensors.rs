@@ -447,13 +447,14 @@ mod tests {
     #[test]
     fn shipped_weights_load_to_the_values_the_hand_written_reader_gave() {
         // fingerprints, value counts and first weights that the hand-written reader (before the
-        // `safetensors` crate, commit 05011b4) produced for the three shipped files
+        // `safetensors` crate, commit 05011b4) produced for the three files shipped then (kept as
+        // a fixture since the networks were retrained, issue 20)
         let want = [
             ("n.safetensors", 0x21d6_a58c_4c77_f157u64, 1871usize, 0.18808584404447287f64),
             ("n_r.safetensors", 0xcea9_9512_46a1_6e25, 993, 0.1016892501570603),
             ("n_s.safetensors", 0x75c4_b32c_4c81_4b60, 993, 0.10465243938423811),
         ];
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/weights-2026-12-01");
         for (file, hash, count, first) in want {
             let path = dir.join(file);
             let bytes = std::fs::read(&path).expect("shipped weights");
