@@ -542,7 +542,12 @@ fn five(a: &FiveArgs) -> anyhow::Result<i32> {
     let t1 = Instant::now();
     let solved: Vec<_> = experiments::table2_shapes()
         .iter()
-        .map(|s| sonoflow_platelet::solve_shape(s, &StokesOptions::default()))
+        .map(|s| {
+            // at the training data's resolution for this shape (thin shapes finer)
+            let base = StokesOptions::default();
+            let n_beta = Refinement::n_beta_for(&Refinement::defaults(), base.n_beta, s);
+            sonoflow_platelet::solve_shape(s, &StokesOptions { n_beta, ..base })
+        })
         .collect::<Result<_, _>>()?;
     let t_solve = t1.elapsed().as_secs_f64();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
