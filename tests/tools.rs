@@ -355,14 +355,40 @@ fn platelet_tools_generate_train_and_run_the_five_particles() {
         (out.status.code().unwrap_or(-1), text)
     };
     let d = data.to_str().unwrap();
-    let (code, text) =
-        run(&["data", "--out", d, "--shapes", "24", "--generalisation", "4", "--n-beta", "6", "--threads", "2"]);
+    let (code, text) = run(&[
+        "data",
+        "--out",
+        d,
+        "--shapes",
+        "24",
+        "--generalisation",
+        "4",
+        "--n-beta",
+        "6",
+        "--threads",
+        "2",
+        "--refine",
+        "none",
+    ]);
     assert_eq!(code, 0, "{text}");
     assert!(text.contains("24 in-bounds + 4 generalisation"), "{text}");
     // resumed: nothing left to solve, same file
     let before = std::fs::read_to_string(&data).unwrap();
-    let (code, text) =
-        run(&["data", "--out", d, "--shapes", "24", "--generalisation", "4", "--n-beta", "6", "--threads", "2"]);
+    let (code, text) = run(&[
+        "data",
+        "--out",
+        d,
+        "--shapes",
+        "24",
+        "--generalisation",
+        "4",
+        "--n-beta",
+        "6",
+        "--threads",
+        "2",
+        "--refine",
+        "none",
+    ]);
     assert_eq!(code, 0, "{text}");
     assert_eq!(std::fs::read_to_string(&data).unwrap(), before);
     // other solver options on the same file: refused
