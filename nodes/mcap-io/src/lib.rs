@@ -101,7 +101,7 @@ use std::{fmt, str::FromStr};
 use serde::{Deserialize, Serialize};
 
 pub use error::McapIoError;
-pub use reader::{InMessage, McapReader, MessageIter, ReadOptions, TopicInfo};
+pub use reader::{InMessage, McapReader, MessageIter, ReadOptions, SharedMessageIter, TopicInfo};
 pub use recover::{recover, RecoverStats};
 pub use topics::{RecordingSummary, TopicCount, TopicRecorder};
 pub use verify::{MessageView, Verification, VerifiedTopic};

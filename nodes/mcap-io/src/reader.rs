@@ -4,6 +4,7 @@ use std::{
     collections::{BTreeMap, HashMap},
     fs::File,
     io::Read,
+    ops::Deref,
     path::{Path, PathBuf},
     sync::Arc,
 };
@@ -280,27 +281,18 @@ impl McapReader {
     /// The selected messages in `log_time` order (ties in file order). On an unfinished file
     /// these are the messages of all complete chunks; the cut-off tail is no error.
     pub fn messages(&self, opts: &ReadOptions) -> Result<MessageIter<'_>, McapIoError> {
-        Ok(MessageIter { raw: self.raw_messages(opts)? })
+        Ok(MessageIter { raw: raw_iter(self, opts)? })
+    }
+
+    /// [`Self::messages`] from a shared reader: the iterator owns a clone of the `Arc` instead
+    /// of a borrow (for callers that cannot hold one, such as the Python bindings).
+    pub fn shared_messages(self: &Arc<Self>, opts: &ReadOptions) -> Result<SharedMessageIter, McapIoError> {
+        Ok(SharedMessageIter { raw: raw_iter(Arc::clone(self), opts)? })
     }
 
     /// Like [`Self::messages`], but yields headers and payloads only (for [`crate::recover`]).
-    pub(crate) fn raw_messages(&self, opts: &ReadOptions) -> Result<RawIter<'_>, McapIoError> {
-        let mut iopts = IndexedReaderOptions::new();
-        if let Some(topics) = &opts.topics {
-            // The indexed reader treats "no matching channel" as "no filter": short-circuit.
-            if !self.summary.channels.values().any(|c| topics.contains(&c.topic)) {
-                return Ok(RawIter { reader: self, inner: None });
-            }
-            iopts = iopts.include_topics(topics.iter().cloned());
-        }
-        if let Some(start) = opts.start_time {
-            iopts = iopts.starting_at(start);
-        }
-        if let Some(end) = opts.end_time {
-            iopts = iopts.ending_before(end);
-        }
-        let inner = IndexedReader::new_with_options(&self.summary, iopts)?;
-        Ok(RawIter { reader: self, inner: Some(inner) })
+    pub(crate) fn raw_messages(&self, opts: &ReadOptions) -> Result<RawIter<&Self>, McapIoError> {
+        raw_iter(self, opts)
     }
 
     fn chunk_data(&self, offset: u64, length: usize) -> Result<&[u8], McapIoError> {
@@ -333,34 +325,72 @@ impl McapReader {
     }
 }
 
+/// The raw iterator over `reader` (a borrow or an `Arc`) for `opts`.
+fn raw_iter<R: Deref<Target = McapReader>>(reader: R, opts: &ReadOptions) -> Result<RawIter<R>, McapIoError> {
+    let mut iopts = IndexedReaderOptions::new();
+    if let Some(topics) = &opts.topics {
+        // The indexed reader treats "no matching channel" as "no filter": short-circuit.
+        if !reader.summary.channels.values().any(|c| topics.contains(&c.topic)) {
+            return Ok(RawIter { reader, inner: None });
+        }
+        iopts = iopts.include_topics(topics.iter().cloned());
+    }
+    if let Some(start) = opts.start_time {
+        iopts = iopts.starting_at(start);
+    }
+    if let Some(end) = opts.end_time {
+        iopts = iopts.ending_before(end);
+    }
+    let inner = IndexedReader::new_with_options(&reader.summary, iopts)?;
+    Ok(RawIter { reader, inner: Some(inner) })
+}
+
+/// The next message of `raw` as an [`InMessage`]; ends the iteration after an error.
+fn next_message<R: Deref<Target = McapReader>>(raw: &mut RawIter<R>) -> Option<Result<InMessage, McapIoError>> {
+    let (header, data) = match raw.next()? {
+        Ok(m) => m,
+        Err(e) => return Some(Err(e)),
+    };
+    let msg = raw.reader.in_message(&header, data);
+    if msg.is_err() {
+        raw.inner = None;
+    }
+    Some(msg)
+}
+
 /// Iterator returned by [`McapReader::messages`]. Ends after the first error.
 pub struct MessageIter<'a> {
-    raw: RawIter<'a>,
+    raw: RawIter<&'a McapReader>,
 }
 
 impl Iterator for MessageIter<'_> {
     type Item = Result<InMessage, McapIoError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        let (header, data) = match self.raw.next()? {
-            Ok(m) => m,
-            Err(e) => return Some(Err(e)),
-        };
-        let msg = self.raw.reader.in_message(&header, data);
-        if msg.is_err() {
-            self.raw.inner = None;
-        }
-        Some(msg)
+        next_message(&mut self.raw)
+    }
+}
+
+/// Iterator returned by [`McapReader::shared_messages`]: [`MessageIter`] owning its reader.
+pub struct SharedMessageIter {
+    raw: RawIter<Arc<McapReader>>,
+}
+
+impl Iterator for SharedMessageIter {
+    type Item = Result<InMessage, McapIoError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        next_message(&mut self.raw)
     }
 }
 
 /// Messages as (header, payload), in log-time order. Ends after the first error.
-pub(crate) struct RawIter<'a> {
-    reader: &'a McapReader,
+pub(crate) struct RawIter<R: Deref<Target = McapReader>> {
+    reader: R,
     inner: Option<IndexedReader>,
 }
 
-impl Iterator for RawIter<'_> {
+impl<R: Deref<Target = McapReader>> Iterator for RawIter<R> {
     type Item = Result<(MessageHeader, Vec<u8>), McapIoError>;
 
     fn next(&mut self) -> Option<Self::Item> {

@@ -1,0 +1,398 @@
+//! `sonoflow._native`: the compiled half of the `sonoflow` Python package (PyO3, stable ABI from
+//! CPython 3.9). Each function takes numpy arrays and a JSON object of parameters that
+//! deserialises straight into the library's own parameter struct (so a bad field is named by the
+//! library's validation), releases the GIL while it computes, and returns numpy arrays that own
+//! the library's output vectors (no copy). The PyMUST-compatible signatures, `Param` handling and
+//! argument checks live in the pure-Python half (`python/sonoflow/`); this layer trusts only the
+//! array shapes it is given and checks everything else again.
+//!
+//! Errors: every library error becomes `ValueError` with the library's message (which names the
+//! field and the allowed range); a non-contiguous array becomes `TypeError`.
+
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use serde::de::DeserializeOwned;
+use sonoflow_beamform::{DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_doppler::{ClutterParams, DopplerEstimator, DopplerParams, Packet};
+use sonoflow_mcap_io::{McapIoError, McapReader, ReadOptions, SharedMessageIter};
+use sonoflow_messages::MessageType;
+use sonoflow_regularise::{Smoothn, SmoothnParams};
+use sonoflow_simus::{MustParam, Scatterers, Simus, SimusOptions, Transmit};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+fn value_error(what: &str, e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(format!("{what}: {e}"))
+}
+
+/// Parses `json` into `T`, naming the offending field.
+fn from_json<T: DeserializeOwned>(what: &str, json: &str) -> PyResult<T> {
+    let de = &mut serde_json::Deserializer::from_str(json);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        if path == "." {
+            value_error(what, e.inner())
+        } else {
+            value_error(what, format!("`{path}`: {}", e.inner()))
+        }
+    })
+}
+
+fn contiguous<'a, T>(name: &str, r: Result<&'a [T], numpy::AsSliceError>) -> PyResult<&'a [T]> {
+    r.map_err(|_| PyTypeError::new_err(format!("{name}: the array must be C-contiguous")))
+}
+
+/// The thread pool set by [`set_threads`] (`None`: rayon's global pool, one thread per core).
+static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);
+
+fn pool() -> Option<Arc<rayon::ThreadPool>> {
+    POOL.lock().map(|p| p.clone()).unwrap_or(None)
+}
+
+/// Runs `f` without the GIL, in the pool chosen by [`set_threads`].
+fn compute<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+    let p = pool();
+    py.detach(move || match p {
+        Some(p) => p.install(f),
+        None => f(),
+    })
+}
+
+/// Sets the number of worker threads of every later call (0 = one per core, the default).
+#[pyfunction]
+fn set_threads(n: usize) -> PyResult<()> {
+    let new = if n == 0 {
+        None
+    } else {
+        let p = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| value_error("threads", e))?;
+        Some(Arc::new(p))
+    };
+    let mut g = POOL.lock().map_err(|_| PyValueError::new_err("threads: the pool lock is poisoned"))?;
+    *g = new;
+    Ok(())
+}
+
+/// The number of worker threads a call uses now.
+#[pyfunction]
+fn threads() -> usize {
+    match pool() {
+        Some(p) => p.current_num_threads(),
+        None => rayon::current_num_threads(),
+    }
+}
+
+/// The probe presets' names, comma-separated.
+#[pyfunction]
+fn probe_presets() -> &'static str {
+    sonoflow_simus::PRESET_NAMES
+}
+
+/// A probe preset as JSON (sonoflow's field names: `n_elements`, `tx_now`, …).
+#[pyfunction]
+fn probe_preset(name: &str) -> PyResult<String> {
+    let p = sonoflow_simus::Probe::preset(name).map_err(|e| value_error("probe", e))?;
+    serde_json::to_string(&p).map_err(|e| value_error("probe", e))
+}
+
+/// Transmit delays (s) of a plane wave (`kind` "plane", `a` = tilt in rad), a focused wave
+/// ("focused", focus (a, b)) or a diverging wave ("diverging", virtual source (a, b)).
+#[pyfunction]
+fn txdelay<'py>(py: Python<'py>, param_json: &str, kind: &str, a: f64, b: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let parts = from_json::<MustParam>("param", param_json)?.into_parts().map_err(|e| value_error("param", e))?;
+    let (probe, c) = (&parts.probe, parts.medium.c);
+    let t = match kind {
+        "plane" => Transmit::plane_wave(probe, c, a),
+        "focused" => Transmit::focused(probe, c, a, b),
+        "diverging" => Transmit::diverging(probe, c, a, b),
+        _ => return Err(value_error("txdelay", format!("unknown wave `{kind}` (plane, focused, diverging)"))),
+    }
+    .map_err(|e| value_error("txdelay", e))?;
+    Ok(PyArray1::from_vec(py, t.delays))
+}
+
+/// SIMUS RF of one transmit. `param_json` is a MUST param (`TXdelay` set), `options_json` a
+/// `SimusOptions`. Returns (rf (n_elements, n_samples) float32, element-major; fs; t0).
+#[pyfunction]
+fn simus<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray1<'py, f32>,
+    z: PyReadonlyArray1<'py, f32>,
+    rc: PyReadonlyArray1<'py, f32>,
+    param_json: &str,
+    options_json: &str,
+) -> PyResult<(Bound<'py, PyAny>, f64, f64)> {
+    let parts = from_json::<MustParam>("param", param_json)?.into_parts().map_err(|e| value_error("param", e))?;
+    let mut options: SimusOptions = from_json("options", options_json)?;
+    if options.fs.is_none() {
+        options.fs = parts.fs;
+    }
+    let transmit = parts.transmit.ok_or_else(|| PyValueError::new_err("delays: missing (param.TXdelay)"))?;
+    let scat = Scatterers::new(
+        contiguous("x", x.as_slice())?.to_vec(),
+        contiguous("z", z.as_slice())?.to_vec(),
+        contiguous("RC", rc.as_slice())?.to_vec(),
+    )
+    .map_err(|e| value_error("scatterers", e))?;
+    let n_el = parts.probe.n_elements;
+    let mut simus = Simus::new(parts.probe, parts.medium, options).map_err(|e| value_error("simus", e))?;
+    let rf = compute(py, || simus.simulate(scat.as_slices(), &transmit)).map_err(|e| value_error("simus", e))?;
+    let (ns, fs, t0) = (rf.n_samples, rf.fs, rf.t0);
+    let arr = PyArray1::from_vec(py, rf.data).reshape([n_el, ns])?;
+    Ok((arr.into_any(), fs, t0))
+}
+
+/// RF (n_samples, n_channels) float32/float64, sample-major → I/Q (n_channels, n_samples)
+/// complex64, channel-major. `params_json` is an `Rf2IqParams` (fc, fs, bandwidth, t0, order).
+#[pyfunction]
+fn rf2iq<'py>(py: Python<'py>, rf: PyReadonlyArrayDyn<'py, f64>, params_json: &str) -> PyResult<Bound<'py, PyAny>> {
+    let params: Rf2IqParams = from_json("param", params_json)?;
+    let [ns, ne] = rf.shape()[..] else {
+        return Err(PyValueError::new_err("RF: expected 2 axes (n_samples, n_channels)"));
+    };
+    let data = contiguous("RF", rf.as_slice())?;
+    let mut r = Rf2Iq::new(params).map_err(|e| value_error("param", e))?;
+    let iq = compute(py, || r.process_to_vec(RfView::sample_major(data, ns, ne))).map_err(|e| value_error("RF", e))?;
+    Ok(PyArray1::from_vec(py, iq).reshape([ne, ns])?.into_any())
+}
+
+/// Delay-and-sum of I/Q frames (n_frames, n_elements, n_samples) complex64 on a regular grid.
+/// `params_json`: `DasParams`; `grid_json`: `Grid`; `delays`: transmit delays (s, NaN = off).
+/// Returns (n_frames, nz, nx) complex64 and the number of taps.
+#[pyfunction]
+fn das<'py>(
+    py: Python<'py>,
+    iq: PyReadonlyArray3<'py, C32>,
+    params_json: &str,
+    grid_json: &str,
+    delays: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, usize)> {
+    let params: DasParams = from_json("param", params_json)?;
+    let grid: Grid = from_json("grid", grid_json)?;
+    grid.validate().map_err(|e| value_error("x, z", e))?;
+    let [nf, ne, ns] = iq.shape()[..] else {
+        return Err(PyValueError::new_err("SIG: expected 3 axes"));
+    };
+    if ne != params.n_elements {
+        return Err(value_error("SIG", format!("{ne} channels but param.Nelements = {}", params.n_elements)));
+    }
+    let tx = TxWave::Delays { delays: contiguous("delaysTX", delays.as_slice())?.to_vec() };
+    let data = contiguous("SIG", iq.as_slice())?;
+    let (npx, frame) = (grid.nx * grid.nz, ne * ns);
+    let out = compute(py, || -> Result<(Vec<C32>, usize), PyErr> {
+        let plan = DasPlan::new(&params, &tx, &grid, ns).map_err(|e| value_error("das", e))?;
+        let mut out = Vec::with_capacity(nf * npx);
+        for f in 0..nf {
+            out.extend(plan.apply_to_vec(&data[f * frame..(f + 1) * frame]).map_err(|e| value_error("das", e))?);
+        }
+        Ok((out, plan.n_taps()))
+    })?;
+    let (img, taps) = out;
+    Ok((PyArray1::from_vec(py, img).reshape([nf, grid.nz, grid.nx])?.into_any(), taps))
+}
+
+/// Slow-time Doppler of a packet (nz, nx, n_frames) complex64 (MUST's layout, C order):
+/// `params_json` a `DopplerParams`, `clutter_json` a `ClutterParams` or "null", `dz` the row
+/// spacing (Loupas only). Returns (velocity, variance, power, flags), each (nz, nx).
+#[allow(clippy::type_complexity)]
+#[pyfunction]
+fn iq2doppler<'py>(
+    py: Python<'py>,
+    iq: PyReadonlyArray3<'py, C32>,
+    params_json: &str,
+    clutter_json: &str,
+    dz: f64,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let params: DopplerParams = from_json("param", params_json)?;
+    params.validate().map_err(|e| value_error("param", e))?;
+    let clutter: Option<ClutterParams> = from_json("clutter", clutter_json)?;
+    if let Some(c) = &clutter {
+        c.validate().map_err(|e| value_error("clutter", e))?;
+    }
+    let [nz, nx, nf] = iq.shape()[..] else {
+        return Err(PyValueError::new_err("IQ: expected 3 axes (nz, nx, n_frames)"));
+    };
+    if nf <= params.lag {
+        return Err(value_error("IQ", format!("{nf} frame(s); lag {} needs at least {}", params.lag, params.lag + 1)));
+    }
+    let src = contiguous("IQ", iq.as_slice())?;
+    let map = compute(py, || -> PyResult<_> {
+        let mut data;
+        let packet = match &clutter {
+            Some(c) => {
+                let n_pix = nz * nx;
+                let mut frames: Vec<Vec<C32>> =
+                    (0..nf).map(|t| (0..n_pix).map(|p| src[p * nf + t]).collect()).collect();
+                let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+                c.apply_frames(&mut refs).map_err(|e| value_error("clutter", e))?;
+                data = vec![C32::new(0.0, 0.0); n_pix * nf];
+                for (t, f) in frames.iter().enumerate() {
+                    for (p, v) in f.iter().enumerate() {
+                        data[p * nf + t] = *v;
+                    }
+                }
+                Packet::PixelMajor { data: &data, n_frames: nf }
+            }
+            None => Packet::PixelMajor { data: src, n_frames: nf },
+        };
+        let mut est = DopplerEstimator::new(params.clone(), nx, nz, dz).map_err(|e| value_error("iq2doppler", e))?;
+        est.estimate_to_map(packet).map_err(|e| value_error("iq2doppler", e))
+    })?;
+    let shape = [nz, nx];
+    Ok((
+        PyArray1::from_vec(py, map.velocity).reshape(shape)?.into_any(),
+        PyArray1::from_vec(py, map.variance).reshape(shape)?.into_any(),
+        PyArray1::from_vec(py, map.power).reshape(shape)?.into_any(),
+        PyArray1::from_vec(py, map.flags).reshape(shape)?.into_any(),
+    ))
+}
+
+/// smoothn of `y` (components × grid, C order, NaN = missing) with optional weights of the
+/// grid's size; `params_json` a `SmoothnParams`. Returns (z, S, converged, outlier fraction).
+#[pyfunction]
+#[pyo3(signature = (y, grid, components, params_json, weights=None))]
+fn smoothn<'py>(
+    py: Python<'py>,
+    y: PyReadonlyArrayDyn<'py, f64>,
+    grid: Vec<usize>,
+    components: usize,
+    params_json: &str,
+    weights: Option<PyReadonlyArrayDyn<'py, f64>>,
+) -> PyResult<(Bound<'py, PyAny>, f64, bool, f64)> {
+    let params: SmoothnParams = from_json("options", params_json)?;
+    params.validate().map_err(|e| value_error("options", e))?;
+    let data = contiguous("y", y.as_slice())?;
+    let n: usize = grid.iter().product();
+    if n * components != data.len() {
+        return Err(value_error("y", format!("{} values for a grid {grid:?} × {components}", data.len())));
+    }
+    let w = match &weights {
+        Some(w) => Some(contiguous("W", w.as_slice())?),
+        None => None,
+    };
+    if let Some(w) = w {
+        if w.len() != n {
+            return Err(value_error("W", format!("{} weights for a grid of {n} points", w.len())));
+        }
+    }
+    let shape: Vec<usize> = y.shape().to_vec();
+    let (out, report) = compute(py, || -> PyResult<_> {
+        let mut ws = Smoothn::new(&grid, components).map_err(|e| value_error("y", e))?;
+        let mut out = vec![0.0; n * components];
+        let report = ws.smooth(data, w, &params, &mut out).map_err(|e| value_error("smoothn", e))?;
+        Ok((out, report))
+    })?;
+    let arr = PyArray1::from_vec(py, out).reshape(shape)?;
+    Ok((arr.into_any(), report.s, report.converged, report.outlier_fraction))
+}
+
+fn mcap_error(e: McapIoError) -> PyErr {
+    match e {
+        McapIoError::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// The wire layout of the message type whose MCAP schema is `schema`: (type name, header size,
+/// element size, ros2msg schema text). The schema text is generated from the wire structs
+/// (`sonoflow-messages`), so Python decodes records without a copy of the layout.
+#[pyfunction]
+fn wire_layout(schema: &str) -> PyResult<(String, usize, usize, String)> {
+    let k = MessageType::from_schema_name(schema).map_err(|e| value_error("schema", e))?;
+    Ok((k.name().to_string(), k.header_size(), k.elem_size(), k.schema_text()))
+}
+
+/// An MCAP recording opened for reading (complete or unfinished).
+#[pyclass(name = "RecordingReader", module = "sonoflow._native", frozen)]
+struct RecordingReader {
+    reader: Arc<McapReader>,
+}
+
+#[pymethods]
+impl RecordingReader {
+    #[new]
+    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let reader = py.detach(|| McapReader::open(&path)).map_err(mcap_error)?;
+        Ok(Self { reader: Arc::new(reader) })
+    }
+
+    /// (topic, schema name, message count or None) per channel.
+    fn topics(&self) -> Vec<(String, String, Option<u64>)> {
+        self.reader.topics().into_iter().map(|t| (t.topic, t.schema_name, t.message_count)).collect()
+    }
+
+    /// Whether the file was finished (summary and footer written).
+    fn is_complete(&self) -> bool {
+        self.reader.is_complete()
+    }
+
+    /// What could be read of an unfinished file (None for a complete one).
+    fn unfinished_note(&self) -> Option<String> {
+        self.reader.unfinished_note()
+    }
+
+    /// The metadata records: (name, {key: value}).
+    fn metadata(&self) -> Vec<(String, BTreeMap<String, String>)> {
+        self.reader.metadata()
+    }
+
+    /// Messages in log-time order: `topics` (None = all), log time in [start, end) ns.
+    #[pyo3(signature = (topics=None, start=None, end=None))]
+    fn messages(&self, topics: Option<Vec<String>>, start: Option<u64>, end: Option<u64>) -> PyResult<MessageIter> {
+        let opts = ReadOptions { topics, start_time: start, end_time: end };
+        let it = self.reader.shared_messages(&opts).map_err(mcap_error)?;
+        Ok(MessageIter { it })
+    }
+}
+
+/// Iterator over a recording's messages: (topic, schema, sequence, log_time, publish_time, bytes).
+#[pyclass(module = "sonoflow._native", unsendable)]
+struct MessageIter {
+    it: SharedMessageIter,
+}
+
+#[pymethods]
+impl MessageIter {
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn __next__<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> PyResult<Option<(String, String, u32, u64, u64, Bound<'py, pyo3::types::PyBytes>)>> {
+        match self.it.next() {
+            None => Ok(None),
+            Some(Err(e)) => Err(mcap_error(e)),
+            Some(Ok(m)) => Ok(Some((
+                m.topic,
+                m.schema_name,
+                m.sequence,
+                m.log_time,
+                m.publish_time,
+                pyo3::types::PyBytes::new(py, &m.data),
+            ))),
+        }
+    }
+}
+
+/// The native module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(set_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(threads, m)?)?;
+    m.add_function(wrap_pyfunction!(probe_presets, m)?)?;
+    m.add_function(wrap_pyfunction!(probe_preset, m)?)?;
+    m.add_function(wrap_pyfunction!(txdelay, m)?)?;
+    m.add_function(wrap_pyfunction!(simus, m)?)?;
+    m.add_function(wrap_pyfunction!(rf2iq, m)?)?;
+    m.add_function(wrap_pyfunction!(das, m)?)?;
+    m.add_function(wrap_pyfunction!(iq2doppler, m)?)?;
+    m.add_function(wrap_pyfunction!(smoothn, m)?)?;
+    m.add_function(wrap_pyfunction!(wire_layout, m)?)?;
+    m.add_class::<RecordingReader>()?;
+    m.add_class::<MessageIter>()?;
+    Ok(())
+}
