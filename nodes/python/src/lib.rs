@@ -378,6 +378,176 @@ impl MessageIter {
     }
 }
 
+/// The wire constants a node written in Python needs: plane ids, vector sources, header flags.
+#[pyfunction]
+fn wire_constants() -> BTreeMap<&'static str, u32> {
+    use sonoflow_messages::plane;
+    BTreeMap::from([
+        ("PLANE_NONE", plane::NONE),
+        ("PLANE_VELOCITY", plane::VELOCITY),
+        ("PLANE_POWER", plane::POWER),
+        ("PLANE_VARIANCE", plane::VARIANCE),
+        ("PLANE_FLAGS", plane::FLAGS),
+        ("PLANE_VX", plane::VX),
+        ("PLANE_VZ", plane::VZ),
+        ("PLANE_MASK", plane::MASK),
+        ("PLANE_WEIGHT", plane::WEIGHT),
+        ("PLANE_PROJECTION_X", plane::PROJECTION_X),
+        ("PLANE_PROJECTION_Z", plane::PROJECTION_Z),
+        ("VECTOR_RAW", sonoflow_messages::VECTOR_RAW),
+        ("VECTOR_REGULARISED", sonoflow_messages::VECTOR_REGULARISED),
+        ("VECTOR_TRUTH", sonoflow_messages::VECTOR_TRUTH),
+        ("FLAG_END_OF_STREAM", sonoflow_messages::FLAG_END_OF_STREAM),
+        ("FLAG_REPLAYED", sonoflow_messages::FLAG_REPLAYED),
+        ("FLAG_RESET", sonoflow_messages::FLAG_RESET),
+    ])
+}
+
+fn kit_error(e: sonoflow_node_kit::KitError) -> PyErr {
+    match e {
+        sonoflow_node_kit::KitError::Terminated => {
+            pyo3::exceptions::PyKeyboardInterrupt::new_err("terminated (SIGINT/SIGTERM)")
+        }
+        e => pyo3::exceptions::PyRuntimeError::new_err(e.to_string()),
+    }
+}
+
+/// A graph node written in Python: the node kit's ports (`SONOFLOW_NODE_CONFIG`, set by the
+/// launcher for an `exec` node), type-erased: messages in and out as header and payload bytes.
+#[pyclass(module = "sonoflow._native", unsendable)]
+struct NodeKit {
+    kit: Option<sonoflow_node_kit::Kit>,
+    inputs: BTreeMap<String, Box<dyn sonoflow_node_kit::DynInput>>,
+    outputs: BTreeMap<String, Box<dyn sonoflow_node_kit::DynOutput>>,
+    eos: BTreeMap<String, bool>,
+}
+
+impl NodeKit {
+    fn kit(&mut self) -> PyResult<&mut sonoflow_node_kit::Kit> {
+        self.kit.as_mut().ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("the node is finished"))
+    }
+}
+
+#[pymethods]
+impl NodeKit {
+    /// Starts the node from the launcher's environment and completes the start-up handshake on
+    /// every wired port. (iceoryx2's ports belong to the thread that made them, so the GIL stays
+    /// held here and in every method; `receive` never blocks.)
+    #[new]
+    fn new() -> PyResult<Self> {
+        let build = || -> Result<Self, sonoflow_node_kit::KitError> {
+            let mut kit = sonoflow_node_kit::Kit::from_env()?;
+            let mut inputs = BTreeMap::new();
+            for (port, q) in kit.cfg.inputs.clone() {
+                inputs.insert(port, kit.dyn_input(&q)?);
+            }
+            let mut outputs = BTreeMap::new();
+            for (port, q) in kit.cfg.outputs.clone() {
+                outputs.insert(port, kit.dyn_output(&q)?);
+            }
+            {
+                let mut ports: Vec<&mut dyn sonoflow_node_kit::Handshake> = Vec::new();
+                for i in inputs.values_mut() {
+                    ports.push(i.as_mut() as &mut dyn sonoflow_node_kit::Handshake);
+                }
+                for o in outputs.values_mut() {
+                    ports.push(o.as_mut() as &mut dyn sonoflow_node_kit::Handshake);
+                }
+                kit.handshake(&mut ports)?;
+            }
+            let eos = inputs.keys().map(|k| (k.clone(), false)).collect();
+            Ok(Self { kit: Some(kit), inputs, outputs, eos })
+        };
+        build().map_err(kit_error)
+    }
+
+    /// Raises KeyboardInterrupt once SIGINT/SIGTERM was received.
+    fn check_termination(&mut self) -> PyResult<()> {
+        self.kit()?.check_termination().map_err(kit_error)
+    }
+
+    /// The node's name.
+    fn name(&mut self) -> PyResult<String> {
+        Ok(self.kit()?.cfg.node_name.clone())
+    }
+
+    /// The node's `[params]` as JSON.
+    fn params(&mut self) -> PyResult<String> {
+        Ok(self.kit()?.cfg.params.to_string())
+    }
+
+    /// {port: message type} of the inputs and of the outputs.
+    #[allow(clippy::type_complexity)]
+    fn ports(&mut self) -> (BTreeMap<String, String>, BTreeMap<String, String>) {
+        let i = self.inputs.iter().map(|(k, v)| (k.clone(), v.kind().name().to_string())).collect();
+        let o = self.outputs.iter().map(|(k, v)| (k.clone(), v.kind().name().to_string())).collect();
+        (i, o)
+    }
+
+    /// Takes the next message of input `port` without waiting: (header bytes, payload bytes),
+    /// `False` at (and after) end of stream, `None` when nothing is queued.
+    fn try_receive<'py>(&mut self, py: Python<'py>, port: &str) -> PyResult<Bound<'py, PyAny>> {
+        if self.eos.get(port).copied().unwrap_or(false) {
+            return Ok(pyo3::types::PyBool::new(py, false).to_owned().into_any());
+        }
+        let input = self
+            .inputs
+            .get_mut(port)
+            .ok_or_else(|| value_error("port", format!("`{port}` is not an input of this node")))?;
+        let mut msg = None;
+        let got = input
+            .receive_with(&mut |h, p| {
+                msg = Some((h.to_vec(), p.to_vec()));
+                Ok(())
+            })
+            .map_err(kit_error)?;
+        match (got, msg) {
+            (None, _) => Ok(py.None().into_bound(py)),
+            (Some(true), _) => {
+                self.eos.insert(port.to_string(), true);
+                Ok(pyo3::types::PyBool::new(py, false).to_owned().into_any())
+            }
+            (Some(false), Some((h, p))) => {
+                self.kit()?.stats.messages_in += 1;
+                let t = (pyo3::types::PyBytes::new(py, &h), pyo3::types::PyBytes::new(py, &p));
+                Ok(t.into_pyobject(py)?.into_any())
+            }
+            (Some(false), None) => Err(pyo3::exceptions::PyRuntimeError::new_err("receive: message without bytes")),
+        }
+    }
+
+    /// Publishes (header bytes, payload bytes) on output `port` and counts it (`compute_ns` of
+    /// the header: the stage statistics).
+    fn publish(
+        &mut self,
+        port: &str,
+        header: &[u8],
+        payload: &[u8],
+        frame_id: u64,
+        t_valid: f64,
+        compute_ns: u64,
+    ) -> PyResult<()> {
+        let out = self
+            .outputs
+            .get_mut(port)
+            .ok_or_else(|| value_error("port", format!("`{port}` is not an output of this node")))?;
+        out.publish_bytes(header, payload, 0).map_err(kit_error)?;
+        self.kit()?.published(payload.len() as u64, frame_id, t_valid, compute_ns).map_err(kit_error)
+    }
+
+    /// Sends end of stream on every output and ends the node (statistics line for the report).
+    fn finish(&mut self, t_valid: f64) -> PyResult<()> {
+        for o in self.outputs.values_mut() {
+            o.eos(t_valid).map_err(kit_error)?;
+        }
+        let mut kit =
+            self.kit.take().ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("the node is finished"))?;
+        kit.stats.gaps = self.inputs.values().map(|i| i.counters().1).sum();
+        kit.finish().map_err(kit_error)?;
+        Ok(())
+    }
+}
+
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -394,5 +564,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;
     m.add_class::<RecordingReader>()?;
     m.add_class::<MessageIter>()?;
+    m.add_function(wrap_pyfunction!(wire_constants, m)?)?;
+    m.add_class::<NodeKit>()?;
     Ok(())
 }

@@ -13,17 +13,19 @@ while they compute; ``set_threads(n)`` sets the worker threads (0 = one per core
 
 Graphs and recordings: ``run(launch_file, set=..., swap=..., out=...)`` runs a graph with the
 ``sonoflow`` executable and returns its report; ``Recording(path)`` reads a recording's messages
-as numpy arrays with their decoded headers.
+as numpy arrays with their decoded headers; ``Node()`` makes the running program a node of a
+graph (a launch file's ``exec`` node: an estimator written in Python).
 """
 
 from . import _native
 from ._param import Options, Param
 from .graph import run
-from .must import das, getparam, iq2doppler, probes, rf2iq, simus, smoothn, txdelay
+from .must import das, doppler_maps, getparam, iq2doppler, probes, rf2iq, simus, smoothn, txdelay
+from .node import Node
 from .recording import Message, Recording
 
 __all__ = ["Param", "Options", "getparam", "probes", "txdelay", "simus", "rf2iq", "das", "iq2doppler",
-           "smoothn", "set_threads", "threads", "run", "Recording", "Message"]
+           "doppler_maps", "smoothn", "set_threads", "threads", "run", "Recording", "Message", "Node"]
 
 
 def set_threads(n):

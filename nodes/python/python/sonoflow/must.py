@@ -9,7 +9,7 @@ import numpy as np
 from . import _native
 from ._param import Options, Param, canonical, dumps, number, probe_json
 
-__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "iq2doppler", "smoothn"]
+__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "iq2doppler", "doppler_maps", "smoothn"]
 
 
 def _array(a, name, dtype, *, ndim=None, allow_nan=False):
@@ -295,7 +295,7 @@ def das(SIG, x, z, delaysTX, param, method="linear", apodization="boxcar"):
     return img[:, :, 0] if sig.ndim == 2 else img
 
 
-def iq2doppler(IQ, param, M=1, lag=1, *, clutter=None, estimator="autocorrelation", dz=None):
+def iq2doppler(IQ, param, M=1, lag=1, *, clutter=None, estimator="autocorrelation", dz=None, _all=False):
     """Doppler velocities (MUST ``iq2doppler``): ``VD, VarD = iq2doppler(IQ, param, M=1, lag=1)``
     with ``IQ`` (nz, nx, n_frames) complex, ``param`` with fc, c (1540) and PRF (or PRP), ``M`` the
     Hamming window size (scalar or [Mz, Mx]). VD > 0: towards the probe (m/s); VarD (m²/s²).
@@ -331,8 +331,18 @@ def iq2doppler(IQ, param, M=1, lag=1, *, clutter=None, estimator="autocorrelatio
     }
     if estimator == "loupas":
         dz = number({"dz": dz}, "dz", "dz", required=True, lo=0, lo_open=True)
-    v, var, _power, _flags = _native.iq2doppler(iq, dumps(params), dumps(clutter), float(dz or 1.0))
+    v, var, power, flags = _native.iq2doppler(iq, dumps(params), dumps(clutter), float(dz or 1.0))
+    if _all:
+        return v, var, power, flags
     return v, var
+
+
+def doppler_maps(IQ, param, M=1, lag=1, **kw):
+    """``iq2doppler`` with every map of sonoflow's estimator: ``(velocity, variance, power,
+    flags)``, each (nz, nx); power = Σ|IQ|² over the frames (after the clutter filter, if any),
+    flags bit 0 = no estimate (zero power or zero autocorrelation), bit 1 = aliasing suspected.
+    Keywords as ``iq2doppler``'s."""
+    return iq2doppler(IQ, param, M, lag, _all=True, **kw)
 
 
 def smoothn(y, W=None, S=None, axis=None, TolZ=1e-3, MaxIter=100, Initial=None, Spacing=None,

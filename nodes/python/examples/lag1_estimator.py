@@ -1,0 +1,108 @@
+"""A Doppler estimator written in Python, swapped in for the built-in `doppler` node:
+
+    [nodes.doppler.variants.python]
+    exec = "python3"
+    args = ["../nodes/python/examples/lag1_estimator.py"]   # relative to the launch file
+    ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }
+
+    sonoflow run launch/quickstart.toml --swap doppler=python
+
+Per packet and (transmit, receive) angle pair it calls sonoflow's lag-L slow-time
+autocorrelation (`sonoflow.doppler_maps`, the built-in estimator's code, paper 1 eq. 19), then
+solves the least-squares (vx, vz) over the looks with the nominal plane-wave projection
+a = −(sin θt + sin θr, cos θt + cos θr)/2 in numpy, and publishes one Doppler map per look and
+the vector field (planes vx, vz, flags, power), as the built-in node does with
+`projection = "nominal"`. Params: `lag` (1 … 16); `projection` is accepted and must be
+"nominal" (the only projection implemented here).
+"""
+
+import time
+
+import numpy as np
+
+import sonoflow as sf
+
+C = sf.node.CONSTANTS
+NO_ESTIMATE = 1
+
+
+def estimate(node, looks, lag):
+    t0 = time.thread_time_ns()
+    first = next(iter(looks.values()))["header"]
+    g = first["grid"]
+    nz, nx = g["nz"], g["nx"]
+    n = nz * nx
+    if len(looks) < 2:
+        raise RuntimeError(f"packet {first['packet']}: vector Doppler needs two angle pairs, got {len(looks)}")
+    ata = np.zeros((3, n))
+    atb = np.zeros((2, n))
+    used = np.zeros(n, dtype=np.int64)
+    power = np.zeros(n, dtype=np.float32)
+    frame_id = 0
+    for look in looks.values():
+        h = look["header"]
+        packet = np.stack([f.reshape(nz, nx) for f in look["frames"]], axis=2)
+        v, _var, p, flags = sf.doppler_maps(packet, {"fc": h["fc"], "c": h["c"], "PRF": h["prf"]}, 1, lag)
+        a0 = -(np.sin(h["tx_angle"]) + np.sin(h["rx_angle"])) / 2
+        a1 = -(np.cos(h["tx_angle"]) + np.cos(h["rx_angle"])) / 2
+        ok = (flags.reshape(-1) & NO_ESTIMATE) == 0
+        vd = v.reshape(-1).astype(np.float64)
+        ata[0, ok] += a0 * a0
+        ata[1, ok] += a0 * a1
+        ata[2, ok] += a1 * a1
+        atb[0, ok] += a0 * vd[ok]
+        atb[1, ok] += a1 * vd[ok]
+        used += ok
+        power += p.reshape(-1) / len(looks)
+        frame_id = max(frame_id, h["common"]["frame_id"])
+        if "maps" in node.outputs:
+            mh = {
+                "common": {"frame_id": h["common"]["frame_id"], "t_valid": h["common"]["t_valid"]},
+                "grid": g, "fc": h["fc"], "c": h["c"], "prf": h["prf"], "rx_angle": h["rx_angle"],
+                "tx_angle": h["tx_angle"], "nyquist_velocity": h["c"] * h["prf"] / (4 * h["fc"] * lag),
+                "packet": h["packet"], "packet_size": len(look["frames"]), "n_planes": 3, "estimator": 101,
+                "plane_ids": [C["PLANE_VELOCITY"], C["PLANE_POWER"], C["PLANE_FLAGS"]],
+            }
+            planes = np.stack([v.reshape(-1), p.reshape(-1), (~ok).astype(np.float32)])
+            node.publish("maps", mh, planes)
+    a11, a12, a22 = ata
+    det = a11 * a22 - a12 * a12
+    good = (used >= 2) & (det > 1e-6 * (a11 + a22) ** 2)
+    out = np.zeros((4, n), dtype=np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[0] = np.where(good, (a22 * atb[0] - a12 * atb[1]) / det, 0.0)
+        out[1] = np.where(good, (a11 * atb[1] - a12 * atb[0]) / det, 0.0)
+    out[2] = np.where(good, 0.0, 1.0)
+    out[3] = power
+    vh = {
+        "common": {"frame_id": frame_id, "t_valid": first["common"]["t_valid"],
+                   "compute_ns": time.thread_time_ns() - t0},
+        "grid": g, "n_planes": 4, "source": C["VECTOR_RAW"], "packet": first["packet"], "converged": 1,
+        "n_looks": len(looks),
+        "plane_ids": [C["PLANE_VX"], C["PLANE_VZ"], C["PLANE_FLAGS"], C["PLANE_POWER"]],
+    }
+    node.publish("vector", vh, out)
+
+
+def main():
+    with sf.Node() as node:
+        lag = node.params.get("lag", 1)
+        if not (isinstance(lag, int) and 1 <= lag <= 16):
+            raise SystemExit(f"lag_estimator: params.lag = {lag!r} is out of range: 1 ..= 16")
+        if node.params.get("projection", "nominal") != "nominal":
+            raise SystemExit("lag1_estimator: params.projection must be \"nominal\" (the only one implemented)")
+        looks, packet = {}, None
+        for m in node.messages("iq"):
+            h = m.header
+            if packet is not None and h["packet"] != packet:
+                estimate(node, looks, lag)
+                looks = {}
+            packet = h["packet"]
+            key = (h["tx_angle"], h["rx_angle"])
+            looks.setdefault(key, {"header": h, "frames": []})["frames"].append(m.data)
+        if looks:
+            estimate(node, looks, lag)
+
+
+if __name__ == "__main__":
+    main()
