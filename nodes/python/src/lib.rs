@@ -248,6 +248,63 @@ fn iq2doppler<'py>(
     ))
 }
 
+/// Least-squares vector velocity from Doppler maps (n_looks, nz, nx) float32 (positive toward
+/// the probe) with the nominal plane-wave projections of (tx, rx) angle pairs (rad), optional
+/// flags (n_looks, nz, nx) uint8 (bit 0: no estimate) and per-look weights. Returns (vx, vz,
+/// flags), each (nz, nx).
+#[allow(clippy::type_complexity)]
+#[pyfunction]
+#[pyo3(signature = (vd, tx_angles, rx_angles, flags=None, weights=None))]
+fn vector_doppler<'py>(
+    py: Python<'py>,
+    vd: PyReadonlyArray3<'py, f32>,
+    tx_angles: Vec<f64>,
+    rx_angles: Vec<f64>,
+    flags: Option<PyReadonlyArray3<'py, u8>>,
+    weights: Option<Vec<f64>>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let [nl, nz, nx] = vd.shape()[..] else {
+        return Err(PyValueError::new_err("VD: expected (n_looks, nz, nx)"));
+    };
+    if tx_angles.len() != nl || rx_angles.len() != nl {
+        return Err(value_error(
+            "angles",
+            format!("{} maps but {} transmit and {} receive angles", nl, tx_angles.len(), rx_angles.len()),
+        ));
+    }
+    let n = nz * nx;
+    let v = contiguous("VD", vd.as_slice())?;
+    let zeros = vec![0u8; nl * n];
+    let f = match &flags {
+        Some(f) => {
+            if f.shape() != vd.shape() {
+                return Err(value_error("flags", format!("shape {:?}, expected VD's {:?}", f.shape(), vd.shape())));
+            }
+            contiguous("flags", f.as_slice())?
+        }
+        None => &zeros,
+    };
+    let w = weights.unwrap_or_else(|| vec![1.0; nl]);
+    let out = compute(py, || -> PyResult<sonoflow_doppler::VectorField> {
+        let inputs: Vec<sonoflow_doppler::VectorInput<'_>> = (0..nl)
+            .map(|k| sonoflow_doppler::VectorInput {
+                velocity: &v[k * n..(k + 1) * n],
+                flags: &f[k * n..(k + 1) * n],
+                projection: sonoflow_doppler::Projection::Nominal { tx_tilt: tx_angles[k], rx_angle: rx_angles[k] },
+            })
+            .collect();
+        let mut out = sonoflow_doppler::VectorField::default();
+        sonoflow_doppler::solve_vector_weighted(&inputs, &w, &mut out).map_err(|e| value_error("vector_doppler", e))?;
+        Ok(out)
+    })?;
+    let shape = [nz, nx];
+    Ok((
+        PyArray1::from_vec(py, out.vx).reshape(shape)?.into_any(),
+        PyArray1::from_vec(py, out.vz).reshape(shape)?.into_any(),
+        PyArray1::from_vec(py, out.flags).reshape(shape)?.into_any(),
+    ))
+}
+
 /// smoothn of `y` (components × grid, C order, NaN = missing) with optional weights of the
 /// grid's size; `params_json` a `SmoothnParams`. Returns (z, S, converged, outlier fraction).
 #[pyfunction]
@@ -561,6 +618,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(das, m)?)?;
     m.add_function(wrap_pyfunction!(iq2doppler, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
+    m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;
     m.add_class::<RecordingReader>()?;
     m.add_class::<MessageIter>()?;

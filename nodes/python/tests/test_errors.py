@@ -136,3 +136,16 @@ def test_set_threads_rejects_bad_counts():
         with pytest.raises(ValueError, match="n = "):
             sf.set_threads(bad)
     assert math.isfinite(sf.threads())
+
+
+def test_bad_vector_doppler_input_is_named():
+    with pytest.raises(ValueError, match="VD: expected at least two"):
+        sf.vector_doppler(np.zeros((1, 4, 4)), [0.0], [0.0])
+    with pytest.raises(ValueError, match="one per map"):
+        sf.vector_doppler(np.zeros((3, 4, 4)), [0.0, 0.0], [0.1, 0.2])
+    with pytest.raises(ValueError, match="flags: shape"):
+        sf.vector_doppler(np.zeros((2, 4, 4)), [0.0, 0.0], [0.1, -0.1], flags=np.zeros((2, 4, 5)))
+    with pytest.raises(ValueError, match="vector weights"):
+        sf.vector_doppler(np.zeros((2, 4, 4)), [0.0, 0.0], [0.1, -0.1], weights=[1.0, -1.0])
+    with pytest.raises(ValueError, match="VD: contains NaN"):
+        sf.vector_doppler(np.full((2, 4, 4), np.nan), [0.0, 0.0], [0.1, -0.1])

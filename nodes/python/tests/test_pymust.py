@@ -227,3 +227,63 @@ def test_thread_count_does_not_change_the_bits(l12_scene):
     finally:
         sf.set_threads(0)
     assert np.array_equal(a, b)
+
+
+def dasmtx_rxangle_fixed():
+    """PyMUST 0.1.9's dasmtx with its one RXangle line fixed (line 557 reads `z.tanRX`, an
+    AttributeError; pymust-notes §7, bench/beamform/pymust_reference.py does the same)."""
+    import importlib
+    import inspect
+
+    mod = importlib.import_module("pymust.dasmtx")
+    src = inspect.getsource(mod.dasmtx)
+    bad = "np.abs(dxT-z.tanRX.flatten())<=(z/cosRX.flatten()/2/fNum)"
+    assert bad in src
+    src = src.replace(bad, "np.abs(dxT-z*tanRX.reshape((-1, 1)))<=(z/cosRX.reshape((-1, 1))/2/fNum)")
+    ns = dict(mod.__dict__)
+    exec(src, ns)
+    return ns["dasmtx"]
+
+
+@pytest.mark.parametrize("rx_deg", [-12.0, 9.0])
+def test_das_steers_the_receive_aperture_as_pymust_intends(l12_scene, rx_deg):
+    """RXangle (the vector-Doppler sub-apertures) on the 7° plane wave, F# 2, against PyMUST's
+    dasmtx with its RXangle line repaired."""
+    *_, p, dels, rf_pm = l12_scene
+    q = copy.deepcopy(p)
+    q.fs, q.fnumber, q.t0, q.RXangle = 4 * p.fc, 2.0, np.zeros(1), np.deg2rad(rx_deg)
+    iq = pymust.rf2iq(rf_pm, copy.deepcopy(q))
+    x, z = np.meshgrid(np.linspace(-5e-3, 5e-3, 35), np.linspace(10e-3, 20e-3, 29))
+    m = dasmtx_rxangle_fixed()(1j * np.array(iq.shape), x, z, dels, copy.deepcopy(q), "linear")
+    want = (m @ iq.flatten(order="F")).reshape(x.shape, order="F")
+    assert nrms(sf.das(iq, x, z, dels, q), want) <= 1e-5
+
+
+def test_vector_doppler_is_the_least_squares_solution():
+    """Against numpy's lstsq per pixel (an independent solve), three looks with weights, one
+    look's estimate missing at some pixels; and a known field projected by the model comes back."""
+    rng = np.random.default_rng(2)
+    tx = np.deg2rad([0.0, 0.0, 10.0])
+    rx = np.deg2rad([-15.0, 15.0, 0.0])
+    vd = rng.normal(0, 0.3, (3, 6, 7)).astype(np.float32)
+    flags = np.zeros((3, 6, 7), np.uint8)
+    flags[2, :2, :] = 1
+    w = [1.0, 2.0, 0.5]
+    vx, vz, fl = sf.vector_doppler(vd, tx, rx, weights=w, flags=flags)
+    A = -0.5 * np.stack([np.sin(tx) + np.sin(rx), np.cos(tx) + np.cos(rx)], axis=1)
+    for iz in range(6):
+        for ix in range(7):
+            use = flags[:, iz, ix] == 0
+            sw = np.sqrt(np.asarray(w)[use])
+            sol = np.linalg.lstsq(A[use] * sw[:, None], vd[use, iz, ix] * sw, rcond=None)[0]
+            assert abs(vx[iz, ix] - sol[0]) < 1e-6 and abs(vz[iz, ix] - sol[1]) < 1e-6
+    assert not fl.any()
+    v_true = np.array([0.4, -0.1])
+    maps = [np.full((2, 2), A[k] @ v_true, np.float32) for k in range(3)]
+    vx, vz, _ = sf.vector_doppler(maps, tx, rx)
+    assert np.allclose(vx, 0.4, atol=1e-6) and np.allclose(vz, -0.1, atol=1e-6)
+    # one usable look is not enough: flagged, zero
+    one = np.ones((3, 1, 1), np.uint8)
+    one[0] = 0
+    vx, vz, fl = sf.vector_doppler(np.ones((3, 1, 1), np.float32), tx, rx, flags=one)
+    assert fl[0, 0] & 1 and vx[0, 0] == 0 and vz[0, 0] == 0

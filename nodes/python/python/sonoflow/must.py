@@ -9,7 +9,7 @@ import numpy as np
 from . import _native
 from ._param import Options, Param, canonical, dumps, number, probe_json
 
-__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "iq2doppler", "doppler_maps", "smoothn"]
+__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn"]
 
 
 def _array(a, name, dtype, *, ndim=None, allow_nan=False):
@@ -343,6 +343,35 @@ def doppler_maps(IQ, param, M=1, lag=1, **kw):
     flags bit 0 = no estimate (zero power or zero autocorrelation), bit 1 = aliasing suspected.
     Keywords as ``iq2doppler``'s."""
     return iq2doppler(IQ, param, M, lag, _all=True, **kw)
+
+
+def vector_doppler(VD, tx_angles, rx_angles, weights=None, flags=None):
+    """Vector Doppler (paper 1 eq. 20): the least-squares (vx, vz) per pixel from Doppler maps of
+    several (transmit, receive) angle pairs. ``VD``: a list of (nz, nx) maps or an array (n_looks,
+    nz, nx), m/s, positive toward the probe (``iq2doppler``'s convention); ``tx_angles``,
+    ``rx_angles``: one per map (rad; the transmit tilt, ``param.RXangle`` of the DAS); nominal
+    plane-wave projection a = −(sin θt + sin θr, cos θt + cos θr)/2; ``weights``: one per map
+    (inverse noise variances, e.g. fc²); ``flags``: maps' flags (bit 0: no estimate, left out).
+    Returns (vx, vz, flags): vx along +x, vz along +z (deeper), float32; flags bit 0 where fewer
+    than two maps were usable or the geometry is singular (then vx = vz = 0)."""
+    vd = np.stack([np.asarray(m) for m in VD]) if isinstance(VD, (list, tuple)) else np.asarray(VD)
+    if vd.ndim != 3 or vd.shape[0] < 2:
+        raise ValueError(f"VD: expected at least two (nz, nx) maps, got shape {vd.shape}")
+    vd = _array(vd, "VD", np.float32)
+    tx = np.atleast_1d(np.asarray(tx_angles, dtype=np.float64)).reshape(-1)
+    rx = np.atleast_1d(np.asarray(rx_angles, dtype=np.float64)).reshape(-1)
+    if tx.size == 1:
+        tx = np.repeat(tx, vd.shape[0])
+    if tx.size != vd.shape[0] or rx.size != vd.shape[0]:
+        raise ValueError(f"tx_angles, rx_angles: one per map ({vd.shape[0]}), got {tx.size} and {rx.size}")
+    if not (np.all(np.isfinite(tx)) and np.all(np.isfinite(rx)) and np.all(np.abs(tx) < 1.4) and np.all(np.abs(rx) < 1.4)):
+        raise ValueError("tx_angles, rx_angles: finite, |angle| < 80° (rad)")
+    f = None
+    if flags is not None:
+        f = np.stack([np.asarray(m) for m in flags]) if isinstance(flags, (list, tuple)) else np.asarray(flags)
+        f = np.ascontiguousarray(f, dtype=np.uint8)
+    w = None if weights is None else [float(x) for x in np.asarray(weights, dtype=np.float64).reshape(-1)]
+    return _native.vector_doppler(vd, tx.tolist(), rx.tolist(), f, w)
 
 
 def smoothn(y, W=None, S=None, axis=None, TolZ=1e-3, MaxIter=100, Initial=None, Spacing=None,
