@@ -396,17 +396,15 @@ impl DopplerEstimator {
                 }
                 return;
             }
-            for ix in 0..nx {
-                let pix = iz * nx + ix;
-                let (mut p, mut c) = (0.0f64, C64::default());
-                for k in 0..nf {
-                    p += pk.get(pix, k).norm_sqr();
+            if let Packet::PixelMajor { data, n_frames } = pk {
+                // each pixel's frames are contiguous: summed along slices, in frame order
+                let c64 = |x: &C32| C64::new(f64::from(x.re), f64::from(x.im));
+                for ix in 0..nx {
+                    let pix = iz * nx + ix;
+                    let s = &data[pix * n_frames..(pix + 1) * n_frames];
+                    r0[ix] = s.iter().fold(0.0f64, |p, x| p + c64(x).norm_sqr());
+                    r1[ix] = s.iter().zip(&s[lag..]).fold(C64::default(), |c, (a, b)| c + c64(a) * c64(b).conj());
                 }
-                for k in 0..nf - lag {
-                    c += pk.get(pix, k) * pk.get(pix, k + lag).conj();
-                }
-                r0[ix] = p;
-                r1[ix] = c;
             }
         });
         if loupas {
