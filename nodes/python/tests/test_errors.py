@@ -149,3 +149,26 @@ def test_bad_vector_doppler_input_is_named():
         sf.vector_doppler(np.zeros((2, 4, 4)), [0.0, 0.0], [0.1, -0.1], weights=[1.0, -1.0])
     with pytest.raises(ValueError, match="VD: contains NaN"):
         sf.vector_doppler(np.full((2, 4, 4), np.nan), [0.0, 0.0], [0.1, -0.1])
+
+
+def test_a_node_outside_a_graph_says_how_it_is_started(monkeypatch):
+    monkeypatch.delenv("SONOFLOW_NODE_CONFIG", raising=False)
+    with pytest.raises(RuntimeError, match="SONOFLOW_NODE_CONFIG is not set: node processes are started by `sonoflow run`"):
+        sf.Node()
+    monkeypatch.setenv("SONOFLOW_NODE_CONFIG", "{not json")
+    with pytest.raises(RuntimeError, match="SONOFLOW_NODE_CONFIG"):
+        sf.Node()
+
+
+def test_node_headers_refuse_unknown_fields_and_overlong_arrays():
+    import numpy as np
+    from sonoflow.node import _fill
+    from sonoflow.recording import _Layout
+
+    h = np.zeros((), dtype=_Layout("VectorFieldV2").header)
+    _fill(h, {"grid": {"nx": 3, "nz": 2}, "plane_ids": [5, 6], "n_planes": 2}, "")
+    assert (int(h["grid"]["nx"]), int(h["grid"]["nz"]), list(h["plane_ids"][:3])) == (3, 2, [5, 6, 0])
+    with pytest.raises(ValueError, match="header: grid.nope is not a field"):
+        _fill(h, {"grid": {"nope": 1}}, "")
+    with pytest.raises(ValueError, match="header: plane_ids takes at most"):
+        _fill(h, {"plane_ids": list(range(100))}, "")
