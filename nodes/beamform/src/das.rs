@@ -598,6 +598,15 @@ impl DasPlan {
         self.index.len()
     }
 
+    /// The plan as a sparse matrix in CSR form, one row per pixel (`iz·nx + ix`): row `p`'s
+    /// taps are `offsets[p] .. offsets[p + 1]`; tap `t` weighs I/Q sample `index[t]` (element
+    /// `index[t] / n_samples`, sample `index[t] % n_samples`) by `w0[t]` and the next sample by
+    /// `w1[t]` (zero for nearest-sample interpolation). MUST's `dasmtx` matrix, with columns in
+    /// the same order (sample + element · n_samples).
+    pub fn taps(&self) -> (&[u32], &[u32], &[C32], &[C32]) {
+        (&self.offsets, &self.index, &self.w0, &self.w1)
+    }
+
     /// Elements summed at pixel `p` (`iz·nx + ix`); 0 if `p` is out of range.
     pub fn active_elements(&self, p: usize) -> usize {
         match (self.offsets.get(p), self.offsets.get(p + 1)) {

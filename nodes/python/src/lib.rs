@@ -192,6 +192,31 @@ fn das<'py>(
     Ok((PyArray1::from_vec(py, img).reshape([nf, grid.nz, grid.nx])?.into_any(), taps))
 }
 
+/// The DAS plan of `das` as CSR parts: (offsets (n_pixels + 1) uint32, index uint32, w0, w1
+/// complex64), rows = pixels `iz·nx + ix`, columns = sample + element · n_samples.
+#[allow(clippy::type_complexity)]
+#[pyfunction]
+fn dasmtx<'py>(
+    py: Python<'py>,
+    n_samples: usize,
+    params_json: &str,
+    grid_json: &str,
+    delays: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let params: DasParams = from_json("param", params_json)?;
+    let grid: Grid = from_json("grid", grid_json)?;
+    grid.validate().map_err(|e| value_error("x, z", e))?;
+    let tx = TxWave::Delays { delays: contiguous("delaysTX", delays.as_slice())?.to_vec() };
+    let plan = compute(py, || DasPlan::new(&params, &tx, &grid, n_samples)).map_err(|e| value_error("dasmtx", e))?;
+    let (o, i, w0, w1) = plan.taps();
+    Ok((
+        PyArray1::from_slice(py, o).into_any(),
+        PyArray1::from_slice(py, i).into_any(),
+        PyArray1::from_slice(py, w0).into_any(),
+        PyArray1::from_slice(py, w1).into_any(),
+    ))
+}
+
 /// Slow-time Doppler of a packet (nz, nx, n_frames) complex64 (MUST's layout, C order):
 /// `params_json` a `DopplerParams`, `clutter_json` a `ClutterParams` or "null", `dz` the row
 /// spacing (Loupas only). Returns (velocity, variance, power, flags), each (nz, nx).
@@ -616,6 +641,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simus, m)?)?;
     m.add_function(wrap_pyfunction!(rf2iq, m)?)?;
     m.add_function(wrap_pyfunction!(das, m)?)?;
+    m.add_function(wrap_pyfunction!(dasmtx, m)?)?;
     m.add_function(wrap_pyfunction!(iq2doppler, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;

@@ -287,3 +287,27 @@ def test_vector_doppler_is_the_least_squares_solution():
     one[0] = 0
     vx, vz, fl = sf.vector_doppler(np.ones((3, 1, 1), np.float32), tx, rx, flags=one)
     assert fl[0, 0] & 1 and vx[0, 0] == 0 and vz[0, 0] == 0
+
+
+@pytest.mark.parametrize("method", ["linear", "nearest"])
+def test_dasmtx_is_pymusts_matrix(l12_scene, method):
+    """The sparse DAS matrix itself, entry by entry (7° plane wave, F# 1.5, 23 × 31 grid), from
+    the size form 1j*[nl, nc] and from the I/Q array; rows in x's Fortran order as PyMUST's."""
+    *_, p, dels, rf_pm = l12_scene
+    q = copy.deepcopy(p)
+    q.fs, q.fnumber, q.t0 = 4 * p.fc, 1.5, np.zeros(1)
+    iq = pymust.rf2iq(rf_pm, copy.deepcopy(q))
+    x, z = np.meshgrid(np.linspace(-4e-3, 4e-3, 31), np.linspace(9e-3, 18e-3, 23))
+    want = pymust.dasmtx(1j * np.array(iq.shape), x, z, dels, copy.deepcopy(q), method).tocsr()
+    got = sf.dasmtx(1j * np.array(iq.shape), x, z, dels, q, method)
+    assert got.shape == want.shape
+    assert got.nnz == want.nnz
+    diff = (got.astype(np.complex128) - want).tocsr()
+    assert np.sqrt(np.sum(np.abs(diff.data) ** 2)) <= 1e-6 * np.sqrt(np.sum(np.abs(want.data) ** 2))
+    img = (got @ iq.flatten(order="F")).reshape(x.shape, order="F")
+    assert nrms(img, sf.das(iq, x, z, dels, q, method)) <= 1e-6
+    # the I/Q itself as SIG, delays from param.TXdelay, transposed coordinates
+    q.TXdelay = dels
+    got_t = sf.dasmtx(iq, x.T, z.T, q, method)
+    img_t = (got_t @ iq.flatten(order="F")).reshape(x.T.shape, order="F")
+    assert nrms(img_t, img.T) <= 1e-6

@@ -9,7 +9,7 @@ import numpy as np
 from . import _native
 from ._param import Options, Param, canonical, dumps, number, probe_json
 
-__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn"]
+__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn"]
 
 
 def _array(a, name, dtype, *, ndim=None, allow_nan=False):
@@ -273,7 +273,21 @@ def das(SIG, x, z, delaysTX, param, method="linear", apodization="boxcar"):
     if n != sig.shape[1]:
         raise ValueError(f"SIG: {sig.shape[1]} channels but param.Nelements = {n}")
     grid, transposed = _grid_from(x, z)
-    params = {
+    params = _das_params(p, n, method, apodization)
+    frames = sig[:, :, None] if sig.ndim == 2 else sig
+    stack = _array(np.transpose(frames, (2, 1, 0)), "SIG", np.complex64, allow_nan=False)
+    d = _delays(delaysTX, n)
+    img, _taps = _native.das(stack, dumps(params), dumps(grid), d)
+    img = np.transpose(img, (1, 2, 0))  # (nz, nx, n_frames)
+    if transposed:
+        img = np.transpose(img, (1, 0, 2))
+    return img[:, :, 0] if sig.ndim == 2 else img
+
+
+def _das_params(p, n, method, apodization):
+    if method not in ("linear", "nearest"):
+        raise ValueError(f"method = {method!r}: allowed 'linear', 'nearest'")
+    return {
         "fc": number(p, "fc", required=True, lo=0, lo_open=True),
         "c": number(p, "c", default=1540.0, lo=0, lo_open=True),
         "fs": number(p, "fs", required=True, lo=0, lo_open=True),
@@ -285,14 +299,59 @@ def das(SIG, x, z, delaysTX, param, method="linear", apodization="boxcar"):
         "interpolation": method,
         "apodization": apodization,
     }
-    frames = sig[:, :, None] if sig.ndim == 2 else sig
-    stack = _array(np.transpose(frames, (2, 1, 0)), "SIG", np.complex64, allow_nan=False)
-    d = _delays(delaysTX, n)
-    img, _taps = _native.das(stack, dumps(params), dumps(grid), d)
-    img = np.transpose(img, (1, 2, 0))  # (nz, nx, n_frames)
-    if transposed:
-        img = np.transpose(img, (1, 0, 2))
-    return img[:, :, 0] if sig.ndim == 2 else img
+
+
+def dasmtx(SIG, x, z, *args, apodization="boxcar"):
+    """The delay-and-sum matrix (MUST/PyMUST ``dasmtx``): ``M = dasmtx(SIG, x, z, delaysTX,
+    param[, method])`` or ``dasmtx(SIG, x, z, param[, method])`` (delays from ``param.TXdelay``).
+    ``SIG`` is the I/Q (n_samples, Nelements) complex array or its size as ``1j*np.array([nl,
+    nc])``. Returns a ``scipy.sparse.csr_matrix`` (x.size, nl·nc), complex64, such that
+    ``(M @ SIG.flatten('F')).reshape(x.shape, order='F')`` is the image (as PyMUST's).
+
+    Differences: I/Q only (a real SIG, MUST's RF matrix, is refused); a regular grid
+    (``np.meshgrid``); ``method`` 'linear' or 'nearest'; RXangle works."""
+    try:
+        import scipy.sparse as sparse
+    except ImportError as e:  # pragma: no cover
+        raise ImportError("dasmtx returns a scipy.sparse matrix: pip install scipy") from e
+    sig = np.asarray(SIG)
+    if sig.dtype.kind != "c":
+        raise TypeError(f"SIG: expected complex I/Q or 1j*[nl, nc], got dtype {sig.dtype}")
+    if sig.ndim == 1 and sig.size == 2:
+        nl, nc = int(round(sig[0].imag)), int(round(sig[1].imag))
+        if nl < 2 or nc < 1:
+            raise ValueError(f"SIG: size 1j*[{nl}, {nc}] needs nl >= 2, nc >= 1")
+    elif sig.ndim == 2:
+        nl, nc = sig.shape
+    else:
+        raise ValueError(f"SIG: expected (n_samples, Nelements) or 1j*[nl, nc], got shape {sig.shape}")
+    if len(args) and hasattr(args[0], "keys"):
+        param, rest = args[0], args[1:]
+        p = canonical(param)
+        if p.get("TXdelay") is None:
+            raise ValueError("param.TXdelay is missing (give delaysTX or set it with txdelay)")
+        delays = p["TXdelay"]
+    elif len(args) >= 2:
+        delays, param, rest = args[0], args[1], args[2:]
+        p = canonical(param)
+    else:
+        raise TypeError("dasmtx: use dasmtx(SIG, x, z, delaysTX, param[, method]) or dasmtx(SIG, x, z, param[, method])")
+    method = rest[0] if rest else "linear"
+    n = number(p, "Nelements", default=nc, lo=1, integer=True)
+    if n != nc:
+        raise ValueError(f"SIG: {nc} channels but param.Nelements = {n}")
+    grid, transposed = _grid_from(x, z)
+    d = _delays(delays, n)
+    offsets, index, w0, w1 = _native.dasmtx(nl, dumps(_das_params(p, n, method, apodization)), dumps(grid), d)
+    nx, nz = grid["nx"], grid["nz"]
+    ours = np.repeat(np.arange(nx * nz), np.diff(offsets.astype(np.int64)))
+    # sonoflow's row iz·nx + ix → the pixel's index in x.flatten('F')
+    rows = ours if transposed else (ours // nx) + (ours % nx) * nz
+    idx = index.astype(np.int64)
+    m = sparse.csr_matrix((np.concatenate([w0, w1]), (np.concatenate([rows, rows]), np.concatenate([idx, idx + 1]))),
+                          shape=(nx * nz, nl * nc))
+    m.eliminate_zeros()
+    return m
 
 
 def iq2doppler(IQ, param, M=1, lag=1, *, clutter=None, estimator="autocorrelation", dz=None, _all=False):
