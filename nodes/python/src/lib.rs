@@ -18,7 +18,7 @@ use sonoflow_doppler::{ClutterParams, DopplerEstimator, DopplerParams, Packet};
 use sonoflow_mcap_io::{McapIoError, McapReader, ReadOptions, SharedMessageIter};
 use sonoflow_messages::MessageType;
 use sonoflow_regularise::{Smoothn, SmoothnParams};
-use sonoflow_simus::{MustParam, Scatterers, Simus, SimusOptions, Transmit};
+use sonoflow_simus::{MustParam, ScattererSlices, Simus, SimusOptions, Transmit};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -129,15 +129,16 @@ fn simus<'py>(
         options.fs = parts.fs;
     }
     let transmit = parts.transmit.ok_or_else(|| PyValueError::new_err("delays: missing (param.TXdelay)"))?;
-    let scat = Scatterers::new(
-        contiguous("x", x.as_slice())?.to_vec(),
-        contiguous("z", z.as_slice())?.to_vec(),
-        contiguous("RC", rc.as_slice())?.to_vec(),
-    )
-    .map_err(|e| value_error("scatterers", e))?;
+    // the numpy buffers themselves (no copy)
+    let scat = ScattererSlices {
+        x: contiguous("x", x.as_slice())?,
+        z: contiguous("z", z.as_slice())?,
+        rc: contiguous("RC", rc.as_slice())?,
+    };
+    scat.validate().map_err(|e| value_error("scatterers", e))?;
     let n_el = parts.probe.n_elements;
     let mut simus = Simus::new(parts.probe, parts.medium, options).map_err(|e| value_error("simus", e))?;
-    let rf = compute(py, || simus.simulate(scat.as_slices(), &transmit)).map_err(|e| value_error("simus", e))?;
+    let rf = compute(py, || simus.simulate(scat, &transmit)).map_err(|e| value_error("simus", e))?;
     let (ns, fs, t0) = (rf.n_samples, rf.fs, rf.t0);
     let arr = PyArray1::from_vec(py, rf.data).reshape([n_el, ns])?;
     Ok((arr.into_any(), fs, t0))
