@@ -4,9 +4,9 @@ on the same inputs, with the same thread count on both sides (default 1: sonoflo
 PyMUST's BLAS both limited to one thread; PyMUST computes in float64, sonoflow's SIMUS in float32
 — the nRMS column says how far apart the outputs are).
 
-    bash nodes/python/test.sh -k nothing        # builds the package into target/python-venv
+    python3 -m venv /tmp/sbs && /tmp/sbs/bin/pip install ./nodes/python pymust==0.1.9   # release build
     OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 \\
-        target/python-venv/bin/python bench/python/side_by_side.py [--threads 1] [--scatterers 5000]
+        /tmp/sbs/bin/python bench/python/side_by_side.py [--threads 1] [--scatterers 5000]
 
 Cases: simus (paper probe, 0° plane wave, N scatterers in a 40 × 40 mm box), das including its
 set-up (PyMUST: dasmtx + the sparse product; 200 × 200 grid, F# 1.5), iq2doppler (200 × 200 × 32
