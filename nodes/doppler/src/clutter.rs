@@ -228,6 +228,21 @@ impl ClutterParams {
         Ok((report, h.collect()))
     }
 
+    /// Filters a packet in MUST's pixel-major layout (`data[pixel·n_frames + frame]`) in place.
+    pub fn apply_pixel_major(&self, data: &mut [C32], n_frames: usize) -> Result<ClutterReport> {
+        let n_pix = data.len() / n_frames.max(1);
+        let mut frames: Vec<Vec<C32>> =
+            (0..n_frames).map(|t| (0..n_pix).map(|p| data[p * n_frames + t]).collect()).collect();
+        let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
+        let report = self.apply_frames(&mut refs)?;
+        for (t, f) in frames.iter().enumerate() {
+            for (p, v) in f.iter().enumerate() {
+                data[p * n_frames + t] = *v;
+            }
+        }
+        Ok(report)
+    }
+
     /// Filters a packet given as one mutable slice per frame.
     pub fn apply_frames(&self, frames: &mut [&mut [C32]]) -> Result<ClutterReport> {
         match *self {

@@ -247,17 +247,8 @@ fn iq2doppler<'py>(
         let mut data;
         let packet = match &clutter {
             Some(c) => {
-                let n_pix = nz * nx;
-                let mut frames: Vec<Vec<C32>> =
-                    (0..nf).map(|t| (0..n_pix).map(|p| src[p * nf + t]).collect()).collect();
-                let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-                c.apply_frames(&mut refs).map_err(|e| value_error("clutter", e))?;
-                data = vec![C32::new(0.0, 0.0); n_pix * nf];
-                for (t, f) in frames.iter().enumerate() {
-                    for (p, v) in f.iter().enumerate() {
-                        data[p * nf + t] = *v;
-                    }
-                }
+                data = src.to_vec();
+                c.apply_pixel_major(&mut data, nf).map_err(|e| value_error("clutter", e))?;
                 Packet::PixelMajor { data: &data, n_frames: nf }
             }
             None => Packet::PixelMajor { data: src, n_frames: nf },
@@ -514,7 +505,7 @@ impl NodeKit {
 #[pymethods]
 impl NodeKit {
     /// Starts the node from the launcher's environment and completes the start-up handshake on
-    /// every wired port. (iceoryx2's ports belong to the thread that made them, so the GIL stays
+    /// every wired port. (The node kit's shared-memory ports belong to the thread that made them, so the GIL stays
     /// held here and in every method; `receive` never blocks.)
     #[new]
     fn new() -> PyResult<Self> {

@@ -38,9 +38,7 @@ use serde::Deserialize;
 use sonoflow_beamform::{
     to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
 };
-use sonoflow_doppler::{
-    flags, ClutterParams, ClutterReport, DopplerEstimator, DopplerParams, Estimator, Packet, WindowShape,
-};
+use sonoflow_doppler::{flags, ClutterParams, DopplerEstimator, DopplerParams, Estimator, Packet, WindowShape};
 use std::path::{Path, PathBuf};
 
 /// The MUST-named keys the beamforming tools read; every other key is ignored.
@@ -490,21 +488,6 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
 }
 
 /// Runs `sonoflow doppler`.
-/// Runs clutter filter `c` on a MUST-layout packet `data[pixel·n_frames + frame]` in place.
-fn clutter_pixel_major(c: &ClutterParams, data: &mut [C32], n_frames: usize) -> anyhow::Result<ClutterReport> {
-    let n_pix = data.len() / n_frames;
-    let mut frames: Vec<Vec<C32>> =
-        (0..n_frames).map(|t| (0..n_pix).map(|p| data[p * n_frames + t]).collect()).collect();
-    let mut refs: Vec<&mut [C32]> = frames.iter_mut().map(|f| f.as_mut_slice()).collect();
-    let report = c.apply_frames(&mut refs).map_err(|e| anyhow::anyhow!("--clutter: {e}"))?;
-    for (t, f) in frames.iter().enumerate() {
-        for (p, v) in f.iter().enumerate() {
-            data[p * n_frames + t] = *v;
-        }
-    }
-    Ok(report)
-}
-
 pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
     let (power_path, var_path, flags_path) =
         (sibling(&a.out, "power"), sibling(&a.out, "variance"), sibling(&a.out, "flags"));
@@ -585,7 +568,7 @@ pub fn run_iq2doppler(a: &DopplerArgs) -> anyhow::Result<i32> {
     let mut data = to_c32(&pk.data);
     let start = std::time::Instant::now();
     let clutter_report = match &clutter {
-        Some(c) => Some(clutter_pixel_major(c, &mut data, nf)?),
+        Some(c) => Some(c.apply_pixel_major(&mut data, nf).map_err(|e| anyhow::anyhow!("--clutter: {e}"))?),
         None => None,
     };
     let mut est = DopplerEstimator::new(params.clone(), nx, nz, dz)?;
