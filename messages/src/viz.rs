@@ -45,6 +45,27 @@ fn field(name: &str, offset: u32) -> PackedElementField {
     PackedElementField { name: name.into(), offset, r#type: NumericType::Float32 as i32 }
 }
 
+/// The schema of the picture [`viz`] makes of a message type (`None`: the type has no picture),
+/// known before any message arrives, so a live viewer can advertise its channels up front.
+pub fn viz_schema(kind: MessageType) -> Option<foxglove::Schema> {
+    match kind {
+        MessageType::ParticleSnapshotV1 => foxglove::schemas::PointCloud::get_schema(),
+        MessageType::DopplerMapV2 | MessageType::VectorFieldV2 => foxglove::schemas::Grid::get_schema(),
+        MessageType::IqFrameV2 => foxglove::schemas::RawImage::get_schema(),
+        MessageType::RfFrameV2 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
+    }
+}
+
+/// Whether messages of this type have a picture.
+pub fn has_picture(kind: MessageType) -> bool {
+    viz_schema(kind).is_some()
+}
+
+/// Message encoding of every picture (`protobuf`).
+pub fn viz_message_encoding() -> String {
+    foxglove::schemas::Grid::get_message_encoding()
+}
+
 /// Picture of a message, if its kind has one. `header`/`payload` are the raw wire bytes.
 pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessage> {
     match kind {

@@ -15,6 +15,7 @@ pub mod evaluator;
 pub mod field_noise;
 pub mod flow_topics;
 pub mod gain;
+pub mod live_view;
 pub mod platelets;
 pub mod recorder;
 pub mod regulariser;
@@ -33,6 +34,7 @@ static KINDS: &[KindSpec] = &[
     regulariser::SPEC,
     evaluator::SPEC,
     recorder::SPEC,
+    live_view::SPEC,
     replay::SPEC,
     test_source::SPEC,
     gain::SPEC,

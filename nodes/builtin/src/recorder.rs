@@ -25,7 +25,8 @@ pub const SPEC: KindSpec = KindSpec::new(
     validate,
     run,
 )
-.with_dynamic_ports(true, false);
+.with_dynamic_ports(true, false)
+.recording();
 
 /// Recorder parameters.
 #[derive(Clone, Debug, Deserialize, Serialize)]

@@ -32,6 +32,11 @@ enum Cmd {
         /// Only print errors, the recording and the report path.
         #[arg(long, short)]
         quiet: bool,
+        /// Watch the run live in Foxglove: adds a `live-view` node named `live` that serves the
+        /// picture topics over Foxglove's WebSocket protocol at ADDR (HOST:PORT, default
+        /// 127.0.0.1:8765; `:0` picks a free port). Its parameters: `--set live.linger_s=30`, ….
+        #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+        live: Option<String>,
     },
     /// Check a launch file without starting anything.
     Check {
@@ -107,8 +112,19 @@ fn main() {
 fn real_main(cli: Cli) -> anyhow::Result<i32> {
     let registry: &'static [KindSpec] = sonoflow_builtin::registry();
     match cli.cmd {
-        Cmd::Run { file, set, swap, out, run_id, quiet } => {
-            let g = match launch::load(&file, &Overrides { set, swap, lenient_files: false }, registry) {
+        Cmd::Run { file, set, swap, out, run_id, quiet, live } => {
+            let mut add_nodes = Vec::new();
+            if let Some(addr) = live {
+                if let Err(e) = sonoflow_live::parse_addr(&addr) {
+                    anyhow::bail!("--live: {e}");
+                }
+                let mut params = toml::Table::new();
+                params.insert("addr".into(), toml::Value::String(addr));
+                let kind = Some(sonoflow_builtin::live_view::SPEC.name.to_string());
+                add_nodes.push(("live".to_string(), launch::NodeDecl { kind, params, ..Default::default() }));
+            }
+            let ov = Overrides { set, swap, lenient_files: false, add_nodes };
+            let g = match launch::load(&file, &ov, registry) {
                 Ok(g) => g,
                 Err(errs) => return Ok(print_errors(&errs)),
             };
@@ -120,7 +136,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
             sonoflow_launcher::run_graph(&g, &sonoflow_launcher::RunOptions { out_dir, run_id, quiet })
         }
         Cmd::Check { file, set, swap } => {
-            match launch::load(&file, &Overrides { set, swap, lenient_files: true }, registry) {
+            match launch::load(&file, &Overrides { set, swap, lenient_files: true, ..Default::default() }, registry) {
                 Ok(g) => {
                     for w in &g.warnings {
                         println!("warning: {w}");

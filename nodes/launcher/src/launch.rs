@@ -172,6 +172,9 @@ pub struct Overrides {
     pub swap: Vec<String>,
     /// `check` only: missing replay files are warnings instead of errors.
     pub lenient_files: bool,
+    /// Nodes added to the file's `[nodes]` before `--swap` and `--set` apply (e.g. the live
+    /// viewer of `sonoflow run --live`); a name the file already uses is an error.
+    pub add_nodes: Vec<(String, NodeDecl)>,
 }
 
 fn valid_name(s: &str, extra: &str) -> bool {
@@ -231,6 +234,14 @@ pub fn resolve(
     let mut errors = Vec::new();
     let mut warnings = Vec::new();
 
+    // Added nodes.
+    for (name, decl) in &ov.add_nodes {
+        if file.nodes.contains_key(name) {
+            errors.push(format!("cannot add node `{name}`: the launch file already has a node of that name"));
+        } else {
+            file.nodes.insert(name.clone(), decl.clone());
+        }
+    }
     // --swap
     for s in &ov.swap {
         match s.split_once('=') {
@@ -409,13 +420,27 @@ pub fn resolve(
                         .and_then(|v| v.as_array())
                         .map(|a| a.iter().filter_map(|s| s.as_str().map(String::from)).collect())
                         .unwrap_or_else(|| vec!["*".to_string()]);
+                    let accepts = |t: &str| match (spec.dynamic_input_types, MessageType::from_name(t)) {
+                        (Some(f), Some(k)) => f(k),
+                        (Some(_), None) => false,
+                        (None, _) => true,
+                    };
                     for w in wanted {
                         if w == "*" {
-                            for t in file.topics.keys() {
-                                inputs.insert(t.clone(), t.clone());
+                            for (t, d) in &file.topics {
+                                if accepts(&d.message_type) {
+                                    inputs.insert(t.clone(), t.clone());
+                                }
                             }
-                        } else if file.topics.contains_key(&w) {
-                            inputs.insert(w.clone(), w.clone());
+                        } else if let Some(d) = file.topics.get(&w) {
+                            if accepts(&d.message_type) {
+                                inputs.insert(w.clone(), w.clone());
+                            } else {
+                                errors.push(format!(
+                                    "nodes.{name}.params.topics: topic `{w}` carries {}, which a {} node does not take",
+                                    d.message_type, spec.name
+                                ));
+                            }
                         } else {
                             errors.push(format!("nodes.{name}.params.topics: no topic `{w}`"));
                         }
@@ -546,7 +571,7 @@ pub fn resolve(
         );
     }
     let recorders: Vec<&String> =
-        programs.iter().filter(|(_, (_, s))| s.map(|s| s.dynamic_inputs).unwrap_or(false)).map(|(n, _)| n).collect();
+        programs.iter().filter(|(_, (_, s))| s.map(|s| s.records).unwrap_or(false)).map(|(n, _)| n).collect();
     let n_stat_publishers = programs.len() - recorders.len();
     let stats = if recorders.is_empty() || n_stat_publishers == 0 {
         None
@@ -619,7 +644,7 @@ pub fn resolve(
             params: params_json.remove(&name).unwrap_or(serde_json::Value::Null),
             inputs: q(&w.inputs),
             outputs: q(&w.outputs),
-            is_recorder: spec.map(|s| s.dynamic_inputs).unwrap_or(false),
+            is_recorder: spec.map(|s| s.records).unwrap_or(false),
             name,
         });
     }
@@ -753,42 +778,28 @@ kind = "recorder"
 
     /// A registry of three kinds, as a program hosting node kinds hands it to the launcher.
     static REGISTRY: &[KindSpec] = &[
-        KindSpec {
-            name: "test-source",
-            about: "",
-            ports: &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV2, true)],
-            dynamic_inputs: false,
-            dynamic_outputs: false,
-            validate: positive_params,
-            check_wiring: None,
-            input_files: &[],
-            run: never,
-        },
-        KindSpec {
-            name: "gain",
-            about: "",
-            ports: &[
+        KindSpec::new(
+            "test-source",
+            "",
+            &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV2, true)],
+            positive_params,
+            never,
+        ),
+        KindSpec::new(
+            "gain",
+            "",
+            &[
                 sonoflow_node_kit::port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
                 sonoflow_node_kit::port("rf_out", PortDir::Out, MessageType::RfFrameV2, true),
             ],
-            dynamic_inputs: false,
-            dynamic_outputs: false,
-            validate: positive_params,
-            check_wiring: None,
-            input_files: &["table"],
-            run: never,
-        },
-        KindSpec {
-            name: "recorder",
-            about: "",
-            ports: &[],
-            dynamic_inputs: true,
-            dynamic_outputs: false,
-            validate: no_params,
-            check_wiring: None,
-            input_files: &[],
-            run: never,
-        },
+            positive_params,
+            never,
+        )
+        .with_input_files(&["table"]),
+        KindSpec::new("recorder", "", &[], no_params, never).with_dynamic_ports(true, false).recording(),
+        KindSpec::new("viewer", "", &[], no_params, never)
+            .with_dynamic_ports(true, false)
+            .with_dynamic_input_types(|k| k == MessageType::VectorFieldV2),
     ];
 
     fn res(ov: Overrides) -> Result<ResolvedGraph, Vec<String>> {
@@ -809,6 +820,31 @@ kind = "recorder"
         // Shared memory: per topic (subscribers × (depth + 2) + 1) slots of the max payload.
         let per = |subs: u64| (subs * 6 + 1) * (1024 * 4 + 1168 + 64);
         assert!(g.shm_bytes >= per(2) + per(1));
+    }
+
+    fn viewer(topics: &[&str]) -> (String, NodeDecl) {
+        let mut params = toml::Table::new();
+        params.insert("topics".into(), toml::Value::Array(topics.iter().map(|t| toml::Value::from(*t)).collect()));
+        let decl = NodeDecl { kind: Some("viewer".into()), params, ..Default::default() };
+        ("view".to_string(), decl)
+    }
+
+    #[test]
+    fn added_nodes_take_only_their_types_and_are_no_recorders() {
+        // The test viewer takes vector fields only: `*` finds none of the graph's RF topics.
+        let g = res(Overrides { add_nodes: vec![viewer(&["*"])], ..Default::default() }).unwrap();
+        let v = g.nodes.iter().find(|n| n.name == "view").unwrap();
+        assert!(v.inputs.is_empty() && !v.is_recorder);
+        assert_eq!(g.stats.as_ref().unwrap().max_subscribers, 1, "only the recorder gets the statistics");
+        let errs = res(Overrides { add_nodes: vec![viewer(&["rf"])], ..Default::default() }).unwrap_err();
+        assert!(errs.iter().any(|e| e.contains("topic `rf` carries RfFrameV2, which a viewer node does not take")), "{errs:?}");
+        let (_, decl) = viewer(&["*"]);
+        let errs = res(Overrides { add_nodes: vec![("rec".into(), decl)], ..Default::default() }).unwrap_err();
+        assert!(errs.iter().any(|e| e.contains("cannot add node `rec`")), "{errs:?}");
+        // `--set` reaches an added node.
+        let g = res(Overrides { add_nodes: vec![viewer(&["*"])], set: vec!["view.linger_s=2".into()], ..Default::default() })
+            .unwrap();
+        assert_eq!(g.nodes.iter().find(|n| n.name == "view").unwrap().params["linger_s"], 2);
     }
 
     #[test]

@@ -51,6 +51,12 @@ pub struct KindSpec {
     pub ports: &'static [PortSpec],
     /// Inputs derived from `params.topics` (a recorder: every topic it records is an input).
     pub dynamic_inputs: bool,
+    /// With `dynamic_inputs`: the message types the kind takes (`topics = ["*"]` picks the
+    /// graph's topics of these types; naming another is an error). `None`: every type.
+    pub dynamic_input_types: Option<fn(MessageType) -> bool>,
+    /// The kind records the graph (a recorder): it also receives the stage statistics, gets the
+    /// resolved launch file, starts first and stops last, and its `path` must not exist yet.
+    pub records: bool,
     /// Outputs named after recorded topics (a replay node).
     pub dynamic_outputs: bool,
     /// Checks the `[params]` table (deserialise + validate); the error names the field.
@@ -86,6 +92,8 @@ impl KindSpec {
             about,
             ports,
             dynamic_inputs: false,
+            dynamic_input_types: None,
+            records: false,
             dynamic_outputs: false,
             validate,
             check_wiring: None,
@@ -110,6 +118,18 @@ impl KindSpec {
     pub const fn with_dynamic_ports(mut self, inputs: bool, outputs: bool) -> Self {
         self.dynamic_inputs = inputs;
         self.dynamic_outputs = outputs;
+        self
+    }
+
+    /// The same kind with dynamic inputs limited to the message types `accepts` takes.
+    pub const fn with_dynamic_input_types(mut self, accepts: fn(MessageType) -> bool) -> Self {
+        self.dynamic_input_types = Some(accepts);
+        self
+    }
+
+    /// The same kind as a recorder of the graph (see [`KindSpec::records`]).
+    pub const fn recording(mut self) -> Self {
+        self.records = true;
         self
     }
 

@@ -326,6 +326,7 @@ fn check_text(text: &str, set: &[&str], swap: &[&str]) -> CaseResult {
         set: set.iter().map(|s| s.to_string()).collect(),
         swap: swap.iter().map(|s| s.to_string()).collect(),
         lenient_files: true,
+        ..Default::default()
     };
     let file: launch::LaunchFile = toml::from_str(text).map_err(|e| e.to_string())?;
     match launch::resolve(file, Path::new("."), &ov, sonoflow_builtin::registry()) {
