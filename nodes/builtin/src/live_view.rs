@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 use sonoflow_live::{parse_addr, LiveOptions, LiveView};
 use sonoflow_messages::viz::has_picture;
-use sonoflow_node_kit::{in_range, parse_params, select_loop, DynInput, Kit, KindSpec, Step};
+use sonoflow_node_kit::{in_range, parse_params, select_loop, DynInput, KindSpec, Kit, Step};
 use std::time::Duration;
 
 /// The `live-view` node kind.
@@ -40,6 +40,9 @@ pub struct LiveViewParams {
     /// After the last message, keep serving the newest pictures this long (s, 0–86400), or
     /// until every viewer that connected has left.
     pub linger_s: f64,
+    /// Before the graph starts, wait this long (s, 0–600) for a viewer to subscribe, so it sees
+    /// the run from its first message; capped at half the graph's `handshake_timeout_s`.
+    pub wait_for_viewer_s: f64,
 }
 
 impl Default for LiveViewParams {
@@ -51,6 +54,7 @@ impl Default for LiveViewParams {
             max_rate_hz: d.max_rate_hz,
             backlog: d.backlog,
             linger_s: 0.0,
+            wait_for_viewer_s: 0.0,
         }
     }
 }
@@ -60,7 +64,9 @@ impl LiveViewParams {
     pub fn options(&self) -> Result<LiveOptions, String> {
         let (host, port) = parse_addr(&self.addr).map_err(|e| format!("addr: {e}"))?;
         in_range("linger_s", self.linger_s, 0.0, 86400.0)?;
-        let o = LiveOptions { host, port, backlog: self.backlog, max_rate_hz: self.max_rate_hz, ..LiveOptions::default() };
+        in_range("wait_for_viewer_s", self.wait_for_viewer_s, 0.0, 600.0)?;
+        let o =
+            LiveOptions { host, port, backlog: self.backlog, max_rate_hz: self.max_rate_hz, ..LiveOptions::default() };
         o.validate().map_err(|e| e.to_string())?;
         Ok(o)
     }
@@ -87,6 +93,21 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         live.url(),
         if names.is_empty() { "none (the graph has no picture topics)".to_string() } else { names.join(", ") }
     );
+    if p.wait_for_viewer_s > 0.0 {
+        // The peers wait for this node's handshake: stay well inside their timeout.
+        let cap = 0.5 * kit.cfg.handshake_timeout_s;
+        let wait = p.wait_for_viewer_s.min(cap);
+        if wait < p.wait_for_viewer_s {
+            eprintln!(
+                "live view: wait_for_viewer_s = {} capped at {wait} s (half the graph's handshake_timeout_s)",
+                p.wait_for_viewer_s
+            );
+        }
+        eprintln!("live view: waiting up to {wait} s for a viewer before the graph starts");
+        if !live.wait_for_viewer(Duration::from_secs_f64(wait)) {
+            eprintln!("live view: no viewer subscribed within {wait} s; the graph starts anyway");
+        }
+    }
     {
         let mut hs: Vec<&mut dyn sonoflow_node_kit::Handshake> =
             inputs.iter_mut().map(|i| i.as_mut() as &mut dyn sonoflow_node_kit::Handshake).collect();
@@ -132,6 +153,7 @@ mod tests {
         assert!(e(serde_json::json!({ "backlog": 0 })).contains("backlog"));
         assert!(e(serde_json::json!({ "max_rate_hz": 0.0 })).contains("max_rate_hz"));
         assert!(e(serde_json::json!({ "port": 1 })).contains("port"));
+        assert!(e(serde_json::json!({ "wait_for_viewer_s": 1e9 })).contains("wait_for_viewer_s"));
         assert!(validate(&serde_json::json!({ "addr": ":0", "linger_s": 2 })).is_ok());
     }
 }

@@ -837,13 +837,20 @@ kind = "recorder"
         assert!(v.inputs.is_empty() && !v.is_recorder);
         assert_eq!(g.stats.as_ref().unwrap().max_subscribers, 1, "only the recorder gets the statistics");
         let errs = res(Overrides { add_nodes: vec![viewer(&["rf"])], ..Default::default() }).unwrap_err();
-        assert!(errs.iter().any(|e| e.contains("topic `rf` carries RfFrameV2, which a viewer node does not take")), "{errs:?}");
+        assert!(
+            errs.iter().any(|e| e.contains("topic `rf` carries RfFrameV2, which a viewer node does not take")),
+            "{errs:?}"
+        );
         let (_, decl) = viewer(&["*"]);
         let errs = res(Overrides { add_nodes: vec![("rec".into(), decl)], ..Default::default() }).unwrap_err();
         assert!(errs.iter().any(|e| e.contains("cannot add node `rec`")), "{errs:?}");
         // `--set` reaches an added node.
-        let g = res(Overrides { add_nodes: vec![viewer(&["*"])], set: vec!["view.linger_s=2".into()], ..Default::default() })
-            .unwrap();
+        let g = res(Overrides {
+            add_nodes: vec![viewer(&["*"])],
+            set: vec!["view.linger_s=2".into()],
+            ..Default::default()
+        })
+        .unwrap();
         assert_eq!(g.nodes.iter().find(|n| n.name == "view").unwrap().params["linger_s"], 2);
     }
 

@@ -35,7 +35,9 @@ pub enum LiveError {
     #[error("{0}")]
     Param(String),
     /// A topic type without a picture.
-    #[error("topic `{topic}` carries {kind}, which has no picture (pictures: particles, I/Q, Doppler maps, vector fields)")]
+    #[error(
+        "topic `{topic}` carries {kind}, which has no picture (pictures: particles, I/Q, Doppler maps, vector fields)"
+    )]
     NoPicture { topic: String, kind: String },
     /// The server could not start (address in use, …).
     #[error("live view: cannot serve on {addr}: {detail}")]
@@ -143,6 +145,7 @@ struct Shared {
     wake: Condvar,
     closing: AtomicBool,
     viewers_seen: AtomicUsize,
+    subscriptions_seen: AtomicUsize,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -155,6 +158,7 @@ struct Latch(Arc<Shared>);
 
 impl ServerListener for Latch {
     fn on_subscribe(&self, client: Client, channel: ChannelView) {
+        self.0.subscriptions_seen.fetch_add(1, Ordering::SeqCst);
         let Some(t) = self.0.topics.iter().find(|t| t.channel.id() == channel.id()) else { return };
         let latest = lock(&t.latest).clone();
         if let (Some(pic), Some(sink)) = (latest, client.sink_id()) {
@@ -208,6 +212,7 @@ impl LiveView {
             wake: Condvar::new(),
             closing: AtomicBool::new(false),
             viewers_seen: AtomicUsize::new(0),
+            subscriptions_seen: AtomicUsize::new(0),
         });
         let addr = format!("{}:{}", opts.host, opts.port);
         let server = WebSocketServer::new()
@@ -242,6 +247,20 @@ impl LiveView {
     /// Viewers connected now.
     pub fn viewers(&self) -> usize {
         self.server.as_ref().map(|s| s.client_count()).unwrap_or(0)
+    }
+
+    /// Waits up to `timeout` until a viewer has subscribed to a topic; true if one has.
+    pub fn wait_for_viewer(&self, timeout: Duration) -> bool {
+        let t0 = Instant::now();
+        loop {
+            if self.shared.subscriptions_seen.load(Ordering::SeqCst) > 0 {
+                return true;
+            }
+            if t0.elapsed() >= timeout {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
     }
 
     /// Hands over a message of topic `index` (raw wire header and payload). Returns at once: the
@@ -353,7 +372,8 @@ fn picture_loop(s: &Shared, period: Duration) {
                 }
                 None if closing => return,
                 None => {
-                    let (guard, _) = s.wake.wait_timeout(mb, wait.max(Duration::from_millis(1))).unwrap_or_else(|p| p.into_inner());
+                    let (guard, _) =
+                        s.wake.wait_timeout(mb, wait.max(Duration::from_millis(1))).unwrap_or_else(|p| p.into_inner());
                     drop(guard);
                     continue;
                 }

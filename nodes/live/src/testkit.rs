@@ -91,7 +91,12 @@ impl Viewer {
                             let id = c.get("id").and_then(|x| x.as_u64()).ok_or("advertise without id")?;
                             self.channels.insert(
                                 id,
-                                Advertised { id, topic: s("topic"), encoding: s("encoding"), schema_name: s("schemaName") },
+                                Advertised {
+                                    id,
+                                    topic: s("topic"),
+                                    encoding: s("encoding"),
+                                    schema_name: s("schemaName"),
+                                },
                             );
                         }
                     }
@@ -113,7 +118,8 @@ impl Viewer {
                 let sub = u32::from_le_bytes([b[1], b[2], b[3], b[4]]);
                 let mut t = [0u8; 8];
                 t.copy_from_slice(&b[5..13]);
-                let ch = self.subscriptions.get(&sub).ok_or_else(|| format!("message for unknown subscription {sub}"))?;
+                let ch =
+                    self.subscriptions.get(&sub).ok_or_else(|| format!("message for unknown subscription {sub}"))?;
                 let a = self.channels.get(ch).ok_or_else(|| format!("message on unknown channel {ch}"))?;
                 Ok(Some(Received {
                     topic: a.topic.clone(),

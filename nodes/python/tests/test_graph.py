@@ -131,3 +131,17 @@ def test_python_estimator_swaps_in_and_agrees_with_the_built_in(tmp_path):
     est = b[2] == 0
     assert est.sum() > n / 2
     assert np.max(np.abs(b[:2, est] - p[:2, est])) < 1e-5
+
+
+def test_run_live_adds_the_viewer_and_checks_its_address(tmp_path):
+    # A live view on a free port with nobody watching: the run is unchanged and the live node's
+    # statistics are in the report; a bad address or type is refused before anything starts.
+    r = sf.run(os.path.join(ROOT, "launch", "quickstart.toml"), set={"flow.schedule.n_packets": 1},
+               out=tmp_path / "live", echo=False, live="127.0.0.1:0")
+    assert r["report"]["status"] == "ok"
+    assert "live" in [n["name"] for n in r["report"]["nodes"]]
+    with pytest.raises(TypeError, match="live"):
+        sf.run(os.path.join(ROOT, "launch", "quickstart.toml"), live=8765)
+    with pytest.raises(RuntimeError, match="--live"):
+        sf.run(os.path.join(ROOT, "launch", "quickstart.toml"), live="nowhere:port", out=tmp_path / "bad",
+               echo=False)

@@ -301,7 +301,12 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
     let mut graphs = Vec::new();
     let mut errors = Vec::new();
     for c in &combos {
-        let ov = Overrides { set: [a.set.clone(), c.clone()].concat(), swap: a.swap.clone(), lenient_files: false, ..Default::default() };
+        let ov = Overrides {
+            set: [a.set.clone(), c.clone()].concat(),
+            swap: a.swap.clone(),
+            lenient_files: false,
+            ..Default::default()
+        };
         match launch::load(&a.file, &ov, registry) {
             Ok(g) => graphs.push(g),
             Err(e) => errors.extend(e.into_iter().map(|e| format!("[{}] {e}", c.join(", ")))),

@@ -40,7 +40,7 @@ def _toml_value(v, key):
     raise TypeError(f"set[{key!r}]: {type(v).__name__} has no TOML form (use str, number, bool, list, dict)")
 
 
-def run(launch_file, set=None, swap=None, out=None, quiet=True, echo=True):
+def run(launch_file, set=None, swap=None, out=None, quiet=True, echo=True, live=None):
     """Runs the graph of ``launch_file`` and returns ``{"report": <report.json as a dict>,
     "evaluations": {label: <evaluation[-label].json as a dict>}, "out": folder, "report_md": path,
     "recording": path or None}`` (the scene's evaluators: unlabelled ``""``).
@@ -48,7 +48,9 @@ def run(launch_file, set=None, swap=None, out=None, quiet=True, echo=True):
     ``set``: ``{"flow.seed": 2, "doppler.clutter": {"type": "svd"}}`` (Python values, as the CLI's
     ``--set NODE.PARAM=VALUE``) or a list of ``"NODE.PARAM=VALUE"`` strings; ``swap``:
     ``{"doppler": "external"}`` or a list of ``"NODE=VARIANT"``; ``out``: the output folder
-    (default ``runs/<graph>-<date-time>`` under the working directory). The launcher's lines are
+    (default ``runs/<graph>-<date-time>`` under the working directory); ``live``: watch the run
+    in Foxglove (``True``: ``ws://127.0.0.1:8765``, or an address ``"HOST:PORT"``; its URL is
+    printed, and the node is ``live`` for ``set``, e.g. ``{"live.linger_s": 30}``). The launcher's lines are
     passed through to stderr (``echo=False``: kept quiet). A failed run raises ``RuntimeError``
     with the launcher's last lines; a bad file or parameter is reported before anything starts."""
     if not os.path.isfile(launch_file):
@@ -68,6 +70,12 @@ def run(launch_file, set=None, swap=None, out=None, quiet=True, echo=True):
         args += ["--swap", s]
     if out is not None:
         args += ["--out", str(out)]
+    if live is True:
+        args.append("--live")
+    elif live not in (None, False):
+        if not isinstance(live, str):
+            raise TypeError(f"live: expected True or an address 'HOST:PORT', got {type(live).__name__}")
+        args += ["--live", live]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines = []
     assert proc.stdout is not None
