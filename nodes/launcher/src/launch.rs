@@ -878,6 +878,7 @@ kind = "recorder"
             set: vec!["src.n_channels=0".into(), "stage.gain=inf".into(), "nosuch.x=1".into()],
             swap: vec!["stage=double".into()],
             lenient_files: false,
+            ..Default::default()
         })
         .unwrap_err();
         assert_eq!(errs.len(), 4, "{errs:#?}");
