@@ -267,18 +267,66 @@ fn mirror(i: isize, n: usize) -> usize {
     j as usize
 }
 
-/// 'same'-size convolution with mirror boundary along x then z (separable kernel).
+#[inline]
+fn c64(x: &C32) -> C64 {
+    C64::new(f64::from(x.re), f64::from(x.im))
+}
+
+/// (s0 + s1) + (s2 + s3) of four partial sums.
+#[inline]
+fn combine<T: Copy + std::ops::Add<Output = T>>(q: [T; 4]) -> T {
+    (q[0] + q[1]) + (q[2] + q[3])
+}
+
+/// R0 = Σ|x_k|² and R_L = Σ x_k·conj(x_{k+L}) of one pixel's frames, each summed in four
+/// partial sums by frame index mod 4 (see `estimate`).
+#[inline]
+fn lag_sums(s: &[C32], lag: usize) -> (f64, C64) {
+    let mut q0 = [0.0f64; 4];
+    let mut chunks = s.chunks_exact(4);
+    for c in &mut chunks {
+        for j in 0..4 {
+            q0[j] += c64(&c[j]).norm_sqr();
+        }
+    }
+    for (j, x) in chunks.remainder().iter().enumerate() {
+        q0[j] += c64(x).norm_sqr();
+    }
+    let m = s.len() - lag;
+    let mut q1 = [C64::default(); 4];
+    for k0 in (0..m - m % 4).step_by(4) {
+        for j in 0..4 {
+            q1[j] += c64(&s[k0 + j]) * c64(&s[k0 + j + lag]).conj();
+        }
+    }
+    for k in m - m % 4..m {
+        q1[k & 3] += c64(&s[k]) * c64(&s[k + lag]).conj();
+    }
+    (combine(q0), combine(q1))
+}
+
+/// 'same'-size convolution with mirror boundary along x then z (separable kernel). Interior
+/// samples index directly, the mirror rule applies only within a kernel half-width of an edge;
+/// every output is summed over the kernel taps in the same order either way.
 fn smooth<T>(data: &mut [T], tmp: &mut [T], nx: usize, nz: usize, wz: &[f64], wx: &[f64])
 where
     T: Copy + Default + Send + Sync + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
 {
-    let (sx, sz) = ((wx.len() as isize - 1) / 2, (wz.len() as isize - 1) / 2);
+    let (sx, sz) = ((wx.len() - 1) / 2, (wz.len() - 1) / 2);
     if wx.len() > 1 {
+        let (lo, hi) = (wx.len() - 1 - sx, nx.saturating_sub(sx)); // i in [lo, hi): no mirroring
         tmp.par_chunks_mut(nx).zip(data.par_chunks(nx)).for_each(|(t, d)| {
             for (i, o) in t.iter_mut().enumerate() {
                 let mut acc = T::default();
-                for (k, w) in wx.iter().enumerate() {
-                    acc = acc + d[mirror(i as isize + sx - k as isize, nx)] * *w;
+                if i >= lo && i < hi {
+                    let top = i + sx;
+                    for (k, w) in wx.iter().enumerate() {
+                        acc = acc + d[top - k] * *w;
+                    }
+                } else {
+                    for (k, w) in wx.iter().enumerate() {
+                        acc = acc + d[mirror(i as isize + sx as isize - k as isize, nx)] * *w;
+                    }
                 }
                 *o = acc;
             }
@@ -286,13 +334,15 @@ where
         data.copy_from_slice(tmp);
     }
     if wz.len() > 1 {
+        // Row by row: output row iz = Σ_k w_k · row(mirror(iz + sz − k)), k ascending.
+        let src: &[T] = data;
         tmp.par_chunks_mut(nx).enumerate().for_each(|(iz, t)| {
-            for (ix, o) in t.iter_mut().enumerate() {
-                let mut acc = T::default();
-                for (k, w) in wz.iter().enumerate() {
-                    acc = acc + data[mirror(iz as isize + sz - k as isize, nz) * nx + ix] * *w;
+            t.fill(T::default());
+            for (k, w) in wz.iter().enumerate() {
+                let r = mirror(iz as isize + sz as isize - k as isize, nz);
+                for (o, x) in t.iter_mut().zip(&src[r * nx..(r + 1) * nx]) {
+                    *o = *o + *x * *w;
                 }
-                *o = acc;
             }
         });
         data.copy_from_slice(tmp);
@@ -376,34 +426,38 @@ impl DopplerEstimator {
             self.rax = vec![C64::default(); n];
         }
         let pk = &packet;
+        // Sums over the frames in four interleaved partial sums (frame index mod 4, combined as
+        // (s0 + s1) + (s2 + s3)): four independent dependency chains instead of one. Both packet
+        // layouts use this order, so they give bit-identical maps.
         self.r0.par_chunks_mut(nx).zip(self.r1.par_chunks_mut(nx)).enumerate().for_each(|(iz, (r0, r1))| {
             if let Packet::Frames(fr) = pk {
-                // stream each frame's row (same per-pixel summation order as below)
+                // stream each frame's row into the partial sums of its lane
                 let row = iz * nx..(iz + 1) * nx;
-                r0.fill(0.0);
-                r1.fill(C64::default());
-                for f in fr.iter() {
-                    for (p, x) in r0.iter_mut().zip(&f[row.clone()]) {
-                        *p += C64::new(f64::from(x.re), f64::from(x.im)).norm_sqr();
+                let mut q0 = vec![[0.0f64; 4]; nx];
+                let mut q1 = vec![[C64::default(); 4]; nx];
+                for (k, f) in fr.iter().enumerate() {
+                    for (q, x) in q0.iter_mut().zip(&f[row.clone()]) {
+                        q[k & 3] += c64(x).norm_sqr();
                     }
                 }
                 for k in 0..nf - lag {
-                    for ((c, a), b) in r1.iter_mut().zip(&fr[k][row.clone()]).zip(&fr[k + lag][row.clone()]) {
-                        let a = C64::new(f64::from(a.re), f64::from(a.im));
-                        let b = C64::new(f64::from(b.re), f64::from(b.im));
-                        *c += a * b.conj();
+                    for ((q, a), b) in q1.iter_mut().zip(&fr[k][row.clone()]).zip(&fr[k + lag][row.clone()]) {
+                        q[k & 3] += c64(a) * c64(b).conj();
                     }
+                }
+                for ix in 0..nx {
+                    r0[ix] = combine(q0[ix]);
+                    r1[ix] = combine(q1[ix]);
                 }
                 return;
             }
             if let Packet::PixelMajor { data, n_frames } = pk {
-                // each pixel's frames are contiguous: summed along slices, in frame order
-                let c64 = |x: &C32| C64::new(f64::from(x.re), f64::from(x.im));
+                // each pixel's frames are contiguous
                 for ix in 0..nx {
                     let pix = iz * nx + ix;
-                    let s = &data[pix * n_frames..(pix + 1) * n_frames];
-                    r0[ix] = s.iter().fold(0.0f64, |p, x| p + c64(x).norm_sqr());
-                    r1[ix] = s.iter().zip(&s[lag..]).fold(C64::default(), |c, (a, b)| c + c64(a) * c64(b).conj());
+                    let (a, b) = lag_sums(&data[pix * n_frames..(pix + 1) * n_frames], lag);
+                    r0[ix] = a;
+                    r1[ix] = b;
                 }
             }
         });
