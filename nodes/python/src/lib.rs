@@ -44,6 +44,17 @@ fn contiguous<'a, T>(name: &str, r: Result<&'a [T], numpy::AsSliceError>) -> PyR
     r.map_err(|_| PyTypeError::new_err(format!("{name}: the array must be C-contiguous")))
 }
 
+/// `ValueError` naming `name` if any component is NaN or infinite (one pass over the bits:
+/// exponent all ones; faster than numpy's isfinite + all on large packets).
+fn check_finite_c32(name: &str, data: &[C32]) -> PyResult<()> {
+    let inf = |x: f32| u32::from(x.to_bits() & 0x7f80_0000 == 0x7f80_0000);
+    let bad = data.chunks(512).any(|c| c.iter().fold(0u32, |acc, x| acc | inf(x.re) | inf(x.im)) != 0);
+    if bad {
+        return Err(PyValueError::new_err(format!("{name}: contains NaN or infinite values")));
+    }
+    Ok(())
+}
+
 /// The thread pool set by [`set_threads`] (`None`: rayon's global pool, one thread per core).
 static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);
 
@@ -243,6 +254,7 @@ fn iq2doppler<'py>(
         return Err(value_error("IQ", format!("{nf} frame(s); lag {} needs at least {}", params.lag, params.lag + 1)));
     }
     let src = contiguous("IQ", iq.as_slice())?;
+    check_finite_c32("IQ", src)?;
     let map = compute(py, || -> PyResult<_> {
         let mut data;
         let packet = match &clutter {

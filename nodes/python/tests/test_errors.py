@@ -106,6 +106,10 @@ def test_bad_beamforming_and_doppler_input_is_named():
         sf.das(iq, x, z, np.zeros(128), p, "cubic")
     with pytest.raises(ValueError, match="IQ: expected \\(nz, nx, n_frames\\)"):
         sf.iq2doppler(np.ones((4, 8), np.complex64), p)
+    bad = np.ones((4, 4, 8), np.complex64)
+    bad[2, 1, 5] = complex(1.0, np.inf)
+    with pytest.raises(ValueError, match="IQ: contains NaN or infinite"):
+        sf.iq2doppler(bad, p)
     with pytest.raises(ValueError, match="IQ: 2 frame\\(s\\); lag 2 needs at least 3"):
         sf.iq2doppler(np.ones((4, 4, 2), np.complex64), p, 1, 2)
     with pytest.raises(ValueError, match="M = 0"):

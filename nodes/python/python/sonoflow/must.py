@@ -367,7 +367,7 @@ def iq2doppler(IQ, param, M=1, lag=1, *, clutter=None, estimator="autocorrelatio
         raise ValueError(f"IQ: expected (nz, nx, n_frames), got shape {iq.shape}")
     if iq.dtype.kind != "c":
         raise TypeError(f"IQ: expected complex I/Q, got dtype {iq.dtype}")
-    iq = _array(iq, "IQ", np.complex64)
+    iq = _array(iq, "IQ", np.complex64, allow_nan=True)  # NaN/inf refused by the native side
     p = canonical(param)
     prf = number(p, "PRF", lo=0, lo_open=True)
     if prf is None:
