@@ -288,28 +288,43 @@ fn spline_second_derivatives(y: &[f64]) -> Vec<f64> {
 }
 
 /// `min_i (d_i + √((x_i − x)² + z²))` and the first index attaining it, as a plain scan would
-/// find them; the values are reduced in 8 independent lanes first (vectorisable), then the index
-/// is the first whose value equals the minimum (the same expression, so the same bits).
+/// find them: 8 independent lanes each keep their smallest value and its first index (the same
+/// expression, branch-free, so it vectorises), then the lanes are merged by value and, on ties,
+/// by index; the tail is scanned after them.
 #[inline(always)]
 fn points_min(xs: &[f64], d: &[f64], x: f64, z: f64) -> (f64, usize) {
     const L: usize = 8;
-    let value = |i: usize| d[i] + ((xs[i] - x) * (xs[i] - x) + z * z).sqrt();
     let n = xs.len().min(d.len());
-    let main = n - n % L;
-    let mut lanes = [f64::INFINITY; L];
-    for c in (0..main).step_by(L) {
-        for (j, lane) in lanes.iter_mut().enumerate() {
-            let v = value(c + j);
-            *lane = if v < *lane { v } else { *lane };
+    let (xs, d) = (&xs[..n], &d[..n]);
+    let z2 = z * z;
+    let mut lv = [f64::INFINITY; L];
+    // the chunk index as f64 (exact below 2^53), so the select is a vector blend
+    let mut li = [0.0f64; L];
+    for (c, (xc, dc)) in xs.chunks_exact(L).zip(d.chunks_exact(L)).enumerate() {
+        let cf = c as f64;
+        for j in 0..L {
+            let dx = xc[j] - x;
+            let v = dc[j] + (dx * dx + z2).sqrt();
+            let better = v < lv[j];
+            lv[j] = if better { v } else { lv[j] };
+            li[j] = if better { cf } else { li[j] };
         }
     }
-    let mut best = lanes.iter().fold(f64::INFINITY, |a, &b| if b < a { b } else { a });
-    for i in main..n {
-        let v = value(i);
-        best = if v < best { v } else { best };
+    let mut best = (f64::INFINITY, usize::MAX);
+    for j in 0..L {
+        let i = li[j] as usize * L + j;
+        if lv[j] < best.0 || (lv[j] == best.0 && lv[j] < f64::INFINITY && i < best.1) {
+            best = (lv[j], i);
+        }
     }
-    let first = (0..n).find(|&i| value(i) == best).unwrap_or(0);
-    (best, first)
+    for i in n - n % L..n {
+        let dx = xs[i] - x;
+        let v = d[i] + (dx * dx + z2).sqrt();
+        if v < best.0 {
+            best = (v, i);
+        }
+    }
+    (best.0, if best.1 == usize::MAX { 0 } else { best.1 })
 }
 
 /// `(sin φ, cos φ)` for |φ| < 2^51, to ~1e-9 absolute (the DAS phase factors are stored in
@@ -459,15 +474,61 @@ impl TxModel {
                     (*m, 0.0, 1.0)
                 }
             }
-            TxKind::Points { x: xs, d } => {
-                let best = points_min(xs, d, x, z);
-                let xi = xs[best.1];
-                let r = (x - xi).hypot(z);
-                let (gx, gz) = if r > 0.0 { ((x - xi) / r, z / r) } else { (0.0, 1.0) };
-                (best.0, gx, gz)
-            }
+            TxKind::Points { x: xs, d } => Self::through_point(xs, points_min(xs, d, x, z), x, z),
         }
     }
+
+    /// `(d_TX, ∂d_TX/∂x, ∂d_TX/∂z)` from the nearest transmit point `best` (value, index).
+    #[inline(always)]
+    fn through_point(xs: &[f64], best: (f64, usize), x: f64, z: f64) -> (f64, f64, f64) {
+        let xi = xs[best.1];
+        let r = (x - xi).hypot(z);
+        let (gx, gz) = if r > 0.0 { ((x - xi) / r, z / r) } else { (0.0, 1.0) };
+        (best.0, gx, gz)
+    }
+
+    /// [`Self::eval`] at `(x_i, z)` for every `x_i` of `xq` (ascending), into `out`. For
+    /// PyMUST's transmit points (sorted by x) the nearest point moves monotonically with x —
+    /// the matrix `d_j + √((x_i − x_j)² + z²)` is Monge, since √(t² + z²) is convex — so the
+    /// minima of a row are found by divide and conquer over the columns, O((points + columns)
+    /// · log columns) evaluations instead of points × columns, each search a [`points_min`]
+    /// over the range its neighbours leave.
+    fn eval_row(&self, xq: &[f64], z: f64, out: &mut Vec<(f64, f64, f64)>) {
+        out.clear();
+        match &self.kind {
+            TxKind::Points { x: xs, d }
+                if xs.windows(2).all(|w| w[0] <= w[1]) && xq.windows(2).all(|w| w[0] < w[1]) =>
+            {
+                let mut best = vec![(0.0, 0usize); xq.len()];
+                monotone_minima(xs, d, xq, z, 0..xq.len(), 0, xs.len().min(d.len()).saturating_sub(1), &mut best);
+                out.extend(xq.iter().zip(&best).map(|(&x, &b)| Self::through_point(xs, b, x, z)));
+            }
+            _ => out.extend(xq.iter().map(|&x| self.eval(x, z))),
+        }
+    }
+}
+
+/// The minima of [`points_min`] for the queries `q` (ascending x), searching only the points
+/// `lo..=hi` (the leftmost minimum of a Monge matrix moves right with the query).
+#[allow(clippy::too_many_arguments)]
+fn monotone_minima(
+    xs: &[f64],
+    d: &[f64],
+    xq: &[f64],
+    z: f64,
+    q: std::ops::Range<usize>,
+    lo: usize,
+    hi: usize,
+    out: &mut [(f64, usize)],
+) {
+    if q.is_empty() {
+        return;
+    }
+    let mid = q.start + (q.end - q.start) / 2;
+    let (v, i) = points_min(&xs[lo..=hi], &d[lo..=hi], xq[mid], z);
+    out[mid] = (v, lo + i);
+    monotone_minima(xs, d, xq, z, q.start..mid, lo, lo + i, out);
+    monotone_minima(xs, d, xq, z, mid + 1..q.end, lo + i, hi, out);
 }
 
 /// A precomputed delay-and-sum operator for one configuration (probe, transmit, receive
@@ -500,6 +561,66 @@ struct Row {
     grad: Vec<[f32; 2]>,
 }
 
+/// One pixel's candidate taps, structure of arrays (reused across pixels): I/Q index, weights,
+/// whether the sample lies on the trace, and (valid, weight, weighted x and z gradient terms).
+struct Taps {
+    geo: Vec<[f64; 6]>,
+    index: Vec<u32>,
+    w0: Vec<C32>,
+    w1: Vec<C32>,
+    valid: Vec<bool>,
+    sums: Vec<[f64; 4]>,
+}
+
+impl Taps {
+    fn with_capacity(n: usize) -> Self {
+        let mut t = Taps {
+            geo: Vec::new(),
+            index: Vec::new(),
+            w0: Vec::new(),
+            w1: Vec::new(),
+            valid: Vec::new(),
+            sums: Vec::new(),
+        };
+        t.resize(n);
+        t
+    }
+
+    fn resize(&mut self, n: usize) {
+        if self.index.len() < n {
+            self.geo.resize(n, [0.0; 6]);
+            self.index.resize(n, 0);
+            self.w0.resize(n, C32::new(0.0, 0.0));
+            self.w1.resize(n, C32::new(0.0, 0.0));
+            self.valid.resize(n, false);
+            self.sums.resize(n, [0.0; 4]);
+        }
+    }
+}
+
+/// Column sums of `v` in 8 independent lanes (vectorisable), then the lanes and the tail.
+#[inline(always)]
+fn lane_sums(v: &[[f64; 4]]) -> [f64; 4] {
+    const L: usize = 8;
+    let mut lanes = [[0.0f64; 4]; L];
+    let chunks = v.chunks_exact(L);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for (lane, x) in lanes.iter_mut().zip(c) {
+            for (a, b) in lane.iter_mut().zip(x) {
+                *a += b;
+            }
+        }
+    }
+    let mut out = [0.0f64; 4];
+    for x in lanes.iter().chain(tail) {
+        for (a, b) in out.iter_mut().zip(x) {
+            *a += b;
+        }
+    }
+    out
+}
+
 /// What building a row of a [`DasPlan`] needs.
 struct RowCtx<'a> {
     model: &'a TxModel,
@@ -514,178 +635,287 @@ struct RowCtx<'a> {
 }
 
 impl RowCtx<'_> {
-    /// Row `iz`, with the widest vector instructions the CPU has (the same operations, so the
-    /// same bits, on every path: Rust does not contract a·b + c into an FMA).
-    fn build(&self, iz: usize) -> Row {
+    /// Walks row `iz` ([`Self::walk_row`]) with the widest vector instructions the CPU has
+    /// (the same operations, so the same bits, on every path: Rust does not contract a·b + c
+    /// into an FMA).
+    fn walk<F: FnMut(usize, PixelTaps<'_>)>(&self, iz: usize, sink: F) {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU has AVX-512F (checked above).
-                return unsafe { self.build_avx512(iz) };
+                return unsafe { self.walk_avx512(iz, sink) };
             }
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU has AVX2 (checked above).
-                return unsafe { self.build_avx2(iz) };
+                return unsafe { self.walk_avx2(iz, sink) };
             }
         }
-        self.build_row(iz)
+        self.walk_row(iz, sink)
     }
 
     /// # Safety
     /// The CPU must support AVX-512F.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn build_avx512(&self, iz: usize) -> Row {
-        self.build_row(iz)
+    unsafe fn walk_avx512<F: FnMut(usize, PixelTaps<'_>)>(&self, iz: usize, sink: F) {
+        self.walk_row(iz, sink)
     }
 
     /// # Safety
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn build_avx2(&self, iz: usize) -> Row {
-        self.build_row(iz)
+    unsafe fn walk_avx2<F: FnMut(usize, PixelTaps<'_>)>(&self, iz: usize, sink: F) {
+        self.walk_row(iz, sink)
     }
 
-    /// Per pixel: the distance and delay to every element (vectorisable), the elements the
-    /// pixel uses (aperture, apodisation, trace range), their phase factors (vectorisable), then
-    /// the taps and the mean delay gradient.
-    #[inline(always)]
-    fn build_row(&self, iz: usize) -> Row {
-        let (p, grid, xe) = (self.p, self.grid, self.xe);
-        let (ne, n_samples) = (xe.len(), self.n_samples);
-        let z = grid.z(iz);
+    /// Row `iz` of a plan.
+    fn build(&self, iz: usize) -> Row {
+        let nx = self.grid.nx;
         let mut row = Row {
-            counts: Vec::with_capacity(grid.nx),
+            counts: Vec::with_capacity(nx),
             index: Vec::new(),
             w0: Vec::new(),
             w1: Vec::new(),
-            grad: Vec::with_capacity(grid.nx),
+            grad: Vec::with_capacity(nx),
         };
-        let (mut drx, mut tau) = (vec![0.0f64; ne], vec![0.0f64; ne]);
-        let (mut act, mut act_aw, mut act_idx) =
-            (Vec::with_capacity(ne), Vec::with_capacity(ne), Vec::with_capacity(ne));
-        let (mut act_phase, mut rot) = (Vec::with_capacity(ne), Vec::with_capacity(ne));
-        for ix in 0..grid.nx {
-            let x = grid.x(ix);
-            let (dtx, gtx_x, gtx_z) = self.model.eval(x, z);
-            for ((d, t), &xe) in drx.iter_mut().zip(tau.iter_mut()).zip(xe) {
-                let dx = x - xe;
-                *d = (dx * dx + z * z).sqrt();
-                *t = (dtx + *d) / p.c;
-            }
-            act.clear();
-            act_aw.clear();
-            act_idx.clear();
-            act_phase.clear();
-            for (e, &xe) in xe.iter().enumerate() {
-                let dx = x - xe;
-                // position across the aperture, −½ … ½ (for the apodisation)
-                let u = if p.fnumber > 0.0 {
-                    let (off, half) = if p.rx_angle == 0.0 {
-                        (dx, z / 2.0 / p.fnumber)
-                    } else {
-                        (dx - z * self.tan_rx, z / self.cos_rx / 2.0 / p.fnumber)
-                    };
-                    if off.abs() > half {
-                        continue;
-                    }
-                    -off / (2.0 * half)
+        self.walk(iz, |_, t| {
+            row.counts.push(t.index.len() as u32);
+            row.index.extend_from_slice(t.index);
+            row.w0.extend_from_slice(t.w0);
+            row.w1.extend_from_slice(t.w1);
+            row.grad.push(t.gradient);
+        });
+        row
+    }
+
+    /// The elements pixel (x, z) uses: all of them without an f-number, else those with
+    /// |x − x_e − z·tan θ_RX| ≤ z / cos θ_RX / (2 F#), a contiguous range because the elements are
+    /// sorted by x (pitch > 0); found by bisection on the same expression, so the same elements
+    /// as testing each one.
+    #[inline(always)]
+    fn aperture(&self, x: f64, z: f64) -> (usize, usize, f64) {
+        let (p, xe) = (self.p, self.xe);
+        if p.fnumber <= 0.0 {
+            return (0, xe.len(), 0.0);
+        }
+        let half = z / self.cos_rx / 2.0 / p.fnumber;
+        let off = |e: &f64| (x - e) - z * self.tan_rx;
+        let lo = xe.partition_point(|e| off(e) > half);
+        let hi = lo + xe[lo..].partition_point(|e| off(e) >= -half);
+        (lo, hi, half)
+    }
+
+    /// Hands `sink` each pixel's taps, left to right. Per pixel: the elements in its aperture
+    /// ([`Self::aperture`]); for each, in a branch-free pass that vectorises, the distance,
+    /// delay, fractional sample, apodisation, phase factor (polynomial, [`sincos_fast`]) and
+    /// receive direction; then the I/Q index and f32 weights; then the sums for the mean delay
+    /// gradient; the taps whose sample falls off the trace are dropped last. The transmit
+    /// distances of the whole row come first ([`TxModel::eval_row`]). Hann and boxcar weights
+    /// are positive inside the aperture, so no element is dropped for its weight.
+    #[inline(always)]
+    fn walk_row<F: FnMut(usize, PixelTaps<'_>)>(&self, iz: usize, mut sink: F) {
+        let (p, grid, xe) = (self.p, self.grid, self.xe);
+        let (ne, n_samples) = (xe.len(), self.n_samples);
+        let z = grid.z(iz);
+        let hann = p.apodization == Apodization::Hann;
+        let (inv_c, wc, t0, fs) = (1.0 / p.c, self.wc, p.t0, p.fs);
+        let u_step = if ne > 1 { 1.0 / (ne - 1) as f64 } else { 0.0 };
+        let nearest = p.interpolation == Interpolation::Nearest;
+        let (last, ns_f) = (self.last, n_samples as f64);
+        let mut taps = Taps::with_capacity(ne);
+        let xq: Vec<f64> = (0..grid.nx).map(|ix| grid.x(ix)).collect();
+        let mut tx = Vec::with_capacity(grid.nx);
+        self.model.eval_row(&xq, z, &mut tx);
+        for (ix, &(dtx, gtx_x, gtx_z)) in tx.iter().enumerate() {
+            let x = xq[ix];
+            let (lo, hi, half) = self.aperture(x, z);
+            let m = hi - lo;
+            taps.resize(m);
+            let with_f = p.fnumber > 0.0;
+            let inv_width = if with_f { 1.0 / (2.0 * half) } else { 0.0 };
+            let Taps { geo, index, w0, w1, valid, sums } = &mut taps;
+            // geometry, apodisation and phase (f64, branch-free)
+            for (k, (g, &xk)) in geo[..m].iter_mut().zip(&xe[lo..hi]).enumerate() {
+                let dx = x - xk;
+                let d = (dx * dx + z * z).sqrt();
+                let tau = (dtx + d) * inv_c;
+                let u = if with_f {
+                    -(dx - z * self.tan_rx) * inv_width
                 } else if ne > 1 {
-                    e as f64 / (ne - 1) as f64 - 0.5
+                    (lo + k) as f64 * u_step - 0.5
                 } else {
                     0.0
                 };
-                let aw = p.apodization.weight(u);
-                if aw <= 0.0 {
-                    continue;
-                }
-                let idx = (tau[e] - p.t0) * p.fs;
-                if !(idx >= 0.0 && idx <= self.last) {
-                    continue;
-                }
-                act.push(e);
-                act_aw.push(aw);
-                act_idx.push(idx);
-                act_phase.push(self.wc * tau[e]);
-            }
-            rot.clear();
-            rot.extend(act_phase.iter().map(|&ph| sincos_fast(ph)));
-            let (mut gx, mut gz, mut gw) = (0.0f64, 0.0f64, 0.0f64);
-            for (k, &e) in act.iter().enumerate() {
-                let (aw, idx) = (act_aw[k], act_idx[k]);
-                let r = C32::new(rot[k].1 as f32, rot[k].0 as f32);
-                let base = e * n_samples;
-                match p.interpolation {
-                    Interpolation::Linear => {
-                        let kf = idx.floor();
-                        let f = idx - kf;
-                        row.index.push((base + kf as usize) as u32);
-                        row.w0.push(r * ((1.0 - f) * aw) as f32);
-                        row.w1.push(r * (f * aw) as f32);
-                    }
-                    Interpolation::Nearest => {
-                        let ks = idx.round() as usize;
-                        let r = r * aw as f32;
-                        if ks + 1 < n_samples {
-                            row.index.push((base + ks) as u32);
-                            row.w0.push(r);
-                            row.w1.push(C32::new(0.0, 0.0));
-                        } else {
-                            row.index.push((base + ks - 1) as u32);
-                            row.w0.push(C32::new(0.0, 0.0));
-                            row.w1.push(r);
-                        }
-                    }
-                }
-                gw += aw;
-                let (dx, d) = (x - xe[e], drx[e]);
-                if d > 0.0 {
-                    gx += aw * (gtx_x + dx / d);
-                    gz += aw * (gtx_z + z / d);
+                let aw = if hann {
+                    let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
+                    c * c
                 } else {
-                    gx += aw * gtx_x;
-                    gz += aw * gtx_z;
+                    1.0
+                };
+                let (s, c) = sincos_fast(wc * tau);
+                let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
+                *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, z * inv_d];
+            }
+            // the taps: I/Q index and f32 weights (linear or nearest), on the trace or not
+            let it = geo[..m].iter().zip(&mut index[..m]).zip(&mut w0[..m]).zip(&mut w1[..m]).zip(&mut valid[..m]);
+            if nearest {
+                for (k, ((((g, index), w0), w1), valid)) in it.enumerate() {
+                    let [idx, aw, c, s, ..] = *g;
+                    let rw = C32::new(c as f32, s as f32) * aw as f32;
+                    let ks = idx.round().clamp(0.0, last);
+                    let at_end = ks + 1.0 >= ns_f;
+                    *index = ((lo + k) * n_samples) as u32 + (if at_end { ks - 1.0 } else { ks }) as u32;
+                    *w0 = if at_end { C32::new(0.0, 0.0) } else { rw };
+                    *w1 = if at_end { rw } else { C32::new(0.0, 0.0) };
+                    *valid = idx >= 0.0 && idx <= last;
+                }
+            } else {
+                for (k, ((((g, index), w0), w1), valid)) in it.enumerate() {
+                    let [idx, aw, c, s, ..] = *g;
+                    let r = C32::new(c as f32, s as f32);
+                    let kf = idx.floor();
+                    let f = idx - kf;
+                    *index = ((lo + k) * n_samples) as u32 + kf.clamp(0.0, last) as u32;
+                    *w0 = r * ((1.0 - f) * aw) as f32;
+                    *w1 = r * (f * aw) as f32;
+                    *valid = idx >= 0.0 && idx <= last;
                 }
             }
-            let count = act.len() as u32;
-            row.counts.push(count);
-            row.grad.push(if count > 0 && gw > 0.0 {
+            // (taps, weight, weighted x and z gradient terms) over the taps on the trace
+            for ((g, &ok), sum) in geo[..m].iter().zip(&valid[..m]).zip(&mut sums[..m]) {
+                let [_, aw, _, _, ux, uz] = *g;
+                let a = if ok { aw } else { 0.0 };
+                *sum = [if ok { 1.0 } else { 0.0 }, a, a * (gtx_x + ux), a * (gtx_z + uz)];
+            }
+            let [count, gw, gx, gz] = lane_sums(&sums[..m]);
+            let n = count as usize;
+            if n < m {
+                // keep the taps on the trace, in element order
+                let mut j = 0;
+                for k in 0..m {
+                    if valid[k] {
+                        index[j] = index[k];
+                        w0[j] = w0[k];
+                        w1[j] = w1[k];
+                        j += 1;
+                    }
+                }
+            }
+            let gradient = if count > 0.0 && gw > 0.0 {
                 let s = 1.0 / (gw * p.c);
                 [(gx * s) as f32, (gz * s) as f32]
             } else {
                 [0.0, 0.0]
-            });
+            };
+            sink(ix, PixelTaps { index: &index[..n], w0: &w0[..n], w1: &w1[..n], gradient });
         }
-        row
     }
+}
+
+/// One pixel's taps as [`RowCtx::walk`] hands them over.
+struct PixelTaps<'a> {
+    index: &'a [u32],
+    w0: &'a [C32],
+    w1: &'a [C32],
+    gradient: [f32; 2],
+}
+
+/// `Σ w0·iq[j] + w1·iq[j + 1]` over the taps, in order (the one sum of a plan's pixel and of
+/// [`das_frames`]).
+#[inline(always)]
+fn tap_sum(index: &[u32], w0: &[C32], w1: &[C32], iq: &[C32]) -> C32 {
+    let mut acc = C32::new(0.0, 0.0);
+    for ((j, w0), w1) in index.iter().zip(w0).zip(w1) {
+        let j = *j as usize;
+        if let [s0, s1] = iq[j..j + 2] {
+            acc += w0 * s0 + w1 * s1;
+        }
+    }
+    acc
+}
+
+/// The row context shared by [`DasPlan::new`] and [`das_frames`], after checking the inputs.
+fn with_ctx<T>(
+    params: &DasParams,
+    tx: &TxWave,
+    grid: &Grid,
+    n_samples: usize,
+    f: impl FnOnce(&RowCtx<'_>) -> Result<T>,
+) -> Result<T> {
+    params.validate()?;
+    tx.validate(params.n_elements)?;
+    grid.validate()?;
+    if n_samples < 2 || n_samples.saturating_mul(params.n_elements) > u32::MAX as usize - 2 {
+        return Err(BeamformError::BadDimension {
+            field: "iq.n_samples",
+            got: n_samples,
+            allowed: ">= 2 and n_samples·n_elements < 2^32",
+        });
+    }
+    let model = TxModel::new(tx, params);
+    let p = params;
+    let xe: Vec<f64> = (0..p.n_elements).map(|e| p.element_x(e)).collect();
+    let (tan_rx, cos_rx) = (p.rx_angle.tan(), p.rx_angle.cos());
+    let wc = 2.0 * std::f64::consts::PI * p.fc;
+    let last = match p.interpolation {
+        Interpolation::Linear => (n_samples - 2) as f64,
+        Interpolation::Nearest => (n_samples - 1) as f64,
+    };
+    f(&RowCtx { model: &model, p, xe: &xe, tan_rx, cos_rx, wc, last, grid, n_samples })
+}
+
+/// The images of `n_frames` element-major I/Q frames (`frames`: `n_frames × n_elements ×
+/// n_samples`) without storing a plan: each pixel's taps are built and applied to every frame
+/// at once — the same taps and the same sums as [`DasPlan::new`] + [`DasPlan::apply`], so the
+/// same bits, without writing and reading the plan's tens of megabytes (the faster way when the
+/// taps are used for a few frames only). Returns the images (`n_frames × nz × nx`) and the
+/// number of taps. Errors: as [`DasPlan::new`], `frames` not `n_frames` frames.
+pub fn das_frames(
+    params: &DasParams,
+    tx: &TxWave,
+    grid: &Grid,
+    n_samples: usize,
+    frames: &[C32],
+    n_frames: usize,
+) -> Result<(Vec<C32>, usize)> {
+    let frame = params.n_elements.saturating_mul(n_samples);
+    check_len("iq", frames.len(), frame.saturating_mul(n_frames))?;
+    with_ctx(params, tx, grid, n_samples, |ctx| {
+        let (nx, npx) = (grid.nx, grid.n_pixels());
+        let rows: Vec<(Vec<C32>, usize)> = (0..grid.nz)
+            .into_par_iter()
+            .map(|iz| {
+                let mut vals = vec![C32::new(0.0, 0.0); n_frames * nx];
+                let mut taps = 0;
+                ctx.walk(iz, |ix, t| {
+                    taps += t.index.len();
+                    for (f, iq) in frames.chunks_exact(frame.max(1)).enumerate() {
+                        vals[f * nx + ix] = tap_sum(t.index, t.w0, t.w1, iq);
+                    }
+                });
+                (vals, taps)
+            })
+            .collect();
+        let mut out = vec![C32::new(0.0, 0.0); n_frames * npx];
+        let mut taps = 0;
+        for (iz, (vals, t)) in rows.iter().enumerate() {
+            taps += t;
+            for f in 0..n_frames {
+                out[f * npx + iz * nx..][..nx].copy_from_slice(&vals[f * nx..][..nx]);
+            }
+        }
+        Ok((out, taps))
+    })
 }
 
 impl DasPlan {
     /// Builds the plan. Errors: invalid parameters, wave, grid, or `n_samples < 2`.
     pub fn new(params: &DasParams, tx: &TxWave, grid: &Grid, n_samples: usize) -> Result<Self> {
-        params.validate()?;
-        tx.validate(params.n_elements)?;
-        grid.validate()?;
-        if n_samples < 2 || n_samples.saturating_mul(params.n_elements) > u32::MAX as usize - 2 {
-            return Err(BeamformError::BadDimension {
-                field: "iq.n_samples",
-                got: n_samples,
-                allowed: ">= 2 and n_samples·n_elements < 2^32",
-            });
-        }
-        let model = TxModel::new(tx, params);
+        let rows: Vec<Row> = with_ctx(params, tx, grid, n_samples, |ctx| {
+            Ok((0..grid.nz).into_par_iter().map(|iz| ctx.build(iz)).collect())
+        })?;
         let p = params;
-        let ne = p.n_elements;
-        let xe: Vec<f64> = (0..ne).map(|e| p.element_x(e)).collect();
-        let (tan_rx, cos_rx) = (p.rx_angle.tan(), p.rx_angle.cos());
-        let wc = 2.0 * std::f64::consts::PI * p.fc;
-        let last = match p.interpolation {
-            Interpolation::Linear => (n_samples - 2) as f64,
-            Interpolation::Nearest => (n_samples - 1) as f64,
-        };
-        let ctx = RowCtx { model: &model, p, xe: &xe, tan_rx, cos_rx, wc, last, grid, n_samples };
-        let rows: Vec<Row> = (0..grid.nz).into_par_iter().map(|iz| ctx.build(iz)).collect();
         let nnz: usize = rows.iter().map(|r| r.index.len()).sum();
         if nnz > u32::MAX as usize {
             return Err(invalid("grid", nnz, "fewer than 2^32 taps in total (use a smaller grid)"));
@@ -790,14 +1020,7 @@ impl DasPlan {
     #[inline]
     fn pixel(&self, iq: &[C32], pix: usize) -> C32 {
         let (a, b) = (self.offsets[pix] as usize, self.offsets[pix + 1] as usize);
-        let mut acc = C32::new(0.0, 0.0);
-        for ((j, w0), w1) in self.index[a..b].iter().zip(&self.w0[a..b]).zip(&self.w1[a..b]) {
-            let j = *j as usize;
-            if let [s0, s1] = iq[j..j + 2] {
-                acc += w0 * s0 + w1 * s1;
-            }
-        }
-        acc
+        tap_sum(&self.index[a..b], &self.w0[a..b], &self.w1[a..b], iq)
     }
 
     /// [`DasPlan::apply`] into a new vector.
@@ -870,6 +1093,94 @@ mod tests {
             worst = worst.max((s - phi.sin()).abs()).max((c - phi.cos()).abs());
         }
         assert!(worst < 2e-9, "worst error {worst:e}");
+    }
+
+    /// The divide-and-conquer row of transmit distances equals the per-pixel scan: PyMUST-like
+    /// transmit points (4 per element, uneven delays) and a row crossing the aperture and beyond.
+    #[test]
+    fn row_minima_equal_the_per_pixel_scan() {
+        let p = DasParams {
+            fc: 5e6,
+            c: 1540.0,
+            fs: 20e6,
+            t0: 0.0,
+            pitch: 0.3e-3,
+            n_elements: 32,
+            fnumber: 1.5,
+            rx_angle: 0.0,
+            interpolation: Interpolation::Linear,
+            apodization: Apodization::Hann,
+        };
+        let delays: Vec<f64> = (0..32).map(|e| 1e-6 * ((e * 13 % 7) as f64 / 7.0 + (e as f64 / 9.0).sin())).collect();
+        let model = TxModel::new(&TxWave::Delays { delays }, &p);
+        let xq: Vec<f64> = (0..301).map(|i| -0.02 + 0.04 * i as f64 / 300.0).collect();
+        let mut row = Vec::new();
+        for z in [0.0, 1e-4, 3e-3, 0.02, 0.06] {
+            model.eval_row(&xq, z, &mut row);
+            for (&x, &got) in xq.iter().zip(&row) {
+                let want = model.eval(x, z);
+                assert!(
+                    (got.0 - want.0).abs() <= 1e-15 * want.0.abs().max(1e-3),
+                    "d_TX at ({x}, {z}): {got:?} vs {want:?}"
+                );
+                assert!((got.1 - want.1).abs() < 1e-9 && (got.2 - want.2).abs() < 1e-9, "gradient at ({x}, {z})");
+            }
+        }
+    }
+
+    /// The plan-free images equal the plan's, bit for bit, for several frames, both
+    /// interpolations, with and without f-number, and traces short enough that some taps fall
+    /// off them (the compaction path).
+    #[test]
+    fn das_frames_equals_the_plan() {
+        let (ne, ns, nf) = (24usize, 300usize, 3usize);
+        let iq: Vec<C32> =
+            (0..nf * ne * ns).map(|i| C32::new(((i * 37 % 101) as f32).sin(), ((i * 11 % 53) as f32).cos())).collect();
+        let grid = Grid { x0: -4e-3, z0: 2e-3, dx: 0.1e-3, dz: 0.15e-3, nx: 81, nz: 90 };
+        let delays: Vec<f64> = (0..ne).map(|e| 2e-7 * (e as f64 / 5.0).sin().abs()).collect();
+        for (interpolation, fnumber, tx) in [
+            (Interpolation::Linear, 1.5, TxWave::Delays { delays: delays.clone() }),
+            (Interpolation::Nearest, 0.0, TxWave::PlaneWave { tilt: 0.1 }),
+            (Interpolation::Linear, 0.0, TxWave::Delays { delays: delays.clone() }),
+        ] {
+            let p = DasParams {
+                fc: 5e6,
+                c: 1540.0,
+                fs: 20e6,
+                t0: 1e-6,
+                pitch: 0.3e-3,
+                n_elements: ne,
+                fnumber,
+                rx_angle: if fnumber > 0.0 { 0.05 } else { 0.0 },
+                interpolation,
+                apodization: Apodization::Hann,
+            };
+            let plan = DasPlan::new(&p, &tx, &grid, ns).unwrap();
+            let (got, taps) = das_frames(&p, &tx, &grid, ns, &iq, nf).unwrap();
+            assert_eq!(taps, plan.n_taps());
+            assert!(taps < grid.n_pixels() * ne, "some taps must fall off the traces");
+            for f in 0..nf {
+                let want = plan.apply_to_vec(&iq[f * ne * ns..(f + 1) * ne * ns]).unwrap();
+                let g = &got[f * grid.n_pixels()..(f + 1) * grid.n_pixels()];
+                assert!(g
+                    .iter()
+                    .zip(&want)
+                    .all(|(a, b)| a.re.to_bits() == b.re.to_bits() && a.im.to_bits() == b.im.to_bits()));
+            }
+        }
+        let p = DasParams {
+            fc: 5e6,
+            c: 1540.0,
+            fs: 20e6,
+            t0: 0.0,
+            pitch: 0.3e-3,
+            n_elements: ne,
+            fnumber: 1.0,
+            rx_angle: 0.0,
+            interpolation: Interpolation::Linear,
+            apodization: Apodization::Hann,
+        };
+        assert!(das_frames(&p, &TxWave::PlaneWave { tilt: 0.0 }, &grid, ns, &iq[1..], nf).is_err());
     }
 
     /// The lane-wise minimum equals a plain first-strictly-smaller scan, value and index, also

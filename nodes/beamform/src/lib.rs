@@ -26,7 +26,7 @@ pub mod rf2iq;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 
-pub use das::{Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
+pub use das::{das_frames, Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
 pub use error::{BeamformError, Result};
 pub use grid::Grid;
 pub use multilook::{BeamformerParams, MultiLookBeamformer, PerAngle, RfInfo};

@@ -13,7 +13,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray3, PyRead
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use serde::de::DeserializeOwned;
-use sonoflow_beamform::{DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_beamform::{das_frames, DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
 use sonoflow_doppler::{ClutterParams, DopplerEstimator, DopplerParams, Packet};
 use sonoflow_mcap_io::{McapIoError, McapReader, ReadOptions, SharedMessageIter};
 use sonoflow_messages::MessageType;
@@ -191,15 +191,7 @@ fn das<'py>(
     }
     let tx = TxWave::Delays { delays: contiguous("delaysTX", delays.as_slice())?.to_vec() };
     let data = contiguous("SIG", iq.as_slice())?;
-    let (npx, frame) = (grid.nx * grid.nz, ne * ns);
-    let out = compute(py, || -> Result<(Vec<C32>, usize), PyErr> {
-        let plan = DasPlan::new(&params, &tx, &grid, ns).map_err(|e| value_error("das", e))?;
-        let mut out = Vec::with_capacity(nf * npx);
-        for f in 0..nf {
-            out.extend(plan.apply_to_vec(&data[f * frame..(f + 1) * frame]).map_err(|e| value_error("das", e))?);
-        }
-        Ok((out, plan.n_taps()))
-    })?;
+    let out = compute(py, || das_frames(&params, &tx, &grid, ns, data, nf)).map_err(|e| value_error("das", e))?;
     let (img, taps) = out;
     Ok((PyArray1::from_vec(py, img).reshape([nf, grid.nz, grid.nx])?.into_any(), taps))
 }
