@@ -44,15 +44,11 @@ fn contiguous<'a, T>(name: &str, r: Result<&'a [T], numpy::AsSliceError>) -> PyR
     r.map_err(|_| PyTypeError::new_err(format!("{name}: the array must be C-contiguous")))
 }
 
-/// `ValueError` naming `name` if any component is NaN or infinite (one pass over the bits:
-/// exponent all ones; faster than numpy's isfinite + all on large packets).
-fn check_finite_c32(name: &str, data: &[C32]) -> PyResult<()> {
+/// Whether every component is finite (one pass over the bits: exponent all ones is NaN or
+/// infinite; faster than numpy's isfinite + all on large packets).
+fn all_finite_c32(data: &[C32]) -> bool {
     let inf = |x: f32| u32::from(x.to_bits() & 0x7f80_0000 == 0x7f80_0000);
-    let bad = data.chunks(512).any(|c| c.iter().fold(0u32, |acc, x| acc | inf(x.re) | inf(x.im)) != 0);
-    if bad {
-        return Err(PyValueError::new_err(format!("{name}: contains NaN or infinite values")));
-    }
-    Ok(())
+    !data.chunks(512).any(|c| c.iter().fold(0u32, |acc, x| acc | inf(x.re) | inf(x.im)) != 0)
 }
 
 /// The thread pool set by [`set_threads`] (`None`: rayon's global pool, one thread per core).
@@ -246,11 +242,14 @@ fn iq2doppler<'py>(
         return Err(value_error("IQ", format!("{nf} frame(s); lag {} needs at least {}", params.lag, params.lag + 1)));
     }
     let src = contiguous("IQ", iq.as_slice())?;
-    check_finite_c32("IQ", src)?;
+    let nan = || PyValueError::new_err("IQ: contains NaN or infinite values");
     let map = compute(py, || -> PyResult<_> {
         let mut data;
         let packet = match &clutter {
             Some(c) => {
+                if !all_finite_c32(src) {
+                    return Err(nan());
+                }
                 data = src.to_vec();
                 c.apply_pixel_major(&mut data, nf).map_err(|e| value_error("clutter", e))?;
                 Packet::PixelMajor { data: &data, n_frames: nf }
@@ -258,7 +257,14 @@ fn iq2doppler<'py>(
             None => Packet::PixelMajor { data: src, n_frames: nf },
         };
         let mut est = DopplerEstimator::new(params.clone(), nx, nz, dz).map_err(|e| value_error("iq2doppler", e))?;
-        est.estimate_to_map(packet).map_err(|e| value_error("iq2doppler", e))
+        let map = est.estimate_to_map(packet).map_err(|e| value_error("iq2doppler", e))?;
+        // Without a filter the data are read once: R0 = Σ|x|² (f64, cannot overflow from f32
+        // samples) is finite exactly where every sample of the pixel is, and the spatial window
+        // (weights > 0) carries a non-finite value on to the pixels around it.
+        if clutter.is_none() && !est.autocorrelation().0.iter().all(|r| r.is_finite()) {
+            return Err(nan());
+        }
+        Ok(map)
     })?;
     let shape = [nz, nx];
     Ok((
