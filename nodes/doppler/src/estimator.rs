@@ -244,8 +244,6 @@ pub struct DopplerEstimator {
     rax: Vec<C64>,
     tmp_r: Vec<f64>,
     tmp_c: Vec<C64>,
-    /// arg R_L per pixel (scratch)
-    phase: Vec<f64>,
 }
 
 fn window(shape: WindowShape, m: usize) -> Vec<f64> {
@@ -344,34 +342,108 @@ fn atan2_fast(y: f64, x: f64) -> f64 {
     }
 }
 
-/// The argument of each `r`, into `out`, with the widest vector instructions the CPU has.
-fn phases(r: &[C64], out: &mut [f64]) {
+/// What turns a pixel's (R0, R_L) into its estimate (the lag-1 autocorrelation estimator at
+/// the nominal fc).
+struct Finish {
+    fc: f64,
+    c: f64,
+    prf: f64,
+    lag: f64,
+    var_scale: f64,
+    alias: f64,
+}
+
+impl Finish {
+    /// One row of the map, branch-free so that it vectorises: velocity, power, variance, flags
+    /// and mean frequency from R0 and R_L.
     #[inline(always)]
-    fn run(r: &[C64], out: &mut [f64]) {
-        for (o, z) in out.iter_mut().zip(r) {
-            *o = atan2_fast(z.im, z.re);
+    #[allow(clippy::too_many_arguments)]
+    fn row(
+        &self,
+        r0: &[f64],
+        r1: &[C64],
+        v: &mut [f32],
+        pw: &mut [f32],
+        var: &mut [f32],
+        fl: &mut [u8],
+        fm: &mut [f32],
+    ) {
+        let two_pi = 2.0 * std::f64::consts::PI;
+        let n = r0.len().min(r1.len()).min(v.len()).min(pw.len()).min(var.len()).min(fl.len()).min(fm.len());
+        for i in 0..n {
+            let (q0, q1) = (r0[i], r1[i]);
+            // |R1| without hypot's scaling: R1 sums products of f32 samples, far from overflow
+            let mag = q1.norm_sqr().sqrt();
+            let ok = q0.is_finite() && q0 > 0.0 && mag.is_finite() && mag > 0.0;
+            let phi = atan2_fast(q1.im, q1.re);
+            pw[i] = if q0.is_finite() { q0 as f32 } else { 0.0 };
+            fm[i] = self.fc as f32;
+            v[i] = if ok { (-self.c * self.prf * phi / (2.0 * two_pi * self.fc * self.lag)) as f32 } else { 0.0 };
+            var[i] = if ok { (self.var_scale * (1.0 - mag / q0)) as f32 } else { 0.0 };
+            fl[i] = if !ok {
+                flags::NO_ESTIMATE
+            } else if phi.abs() > self.alias {
+                flags::ALIASING
+            } else {
+                0
+            };
         }
     }
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[target_feature(enable = "avx512f")]
-        unsafe fn avx512(r: &[C64], out: &mut [f64]) {
-            run(r, out)
+
+    /// [`Finish::row`] with the widest vector instructions the CPU has (the same operations,
+    /// so the same bits).
+    #[allow(clippy::too_many_arguments)]
+    fn row_simd(
+        &self,
+        r0: &[f64],
+        r1: &[C64],
+        v: &mut [f32],
+        pw: &mut [f32],
+        var: &mut [f32],
+        fl: &mut [u8],
+        fm: &mut [f32],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx512f")]
+            #[allow(clippy::too_many_arguments)]
+            unsafe fn avx512(
+                f: &Finish,
+                r0: &[f64],
+                r1: &[C64],
+                v: &mut [f32],
+                pw: &mut [f32],
+                var: &mut [f32],
+                fl: &mut [u8],
+                fm: &mut [f32],
+            ) {
+                f.row(r0, r1, v, pw, var, fl, fm)
+            }
+            #[target_feature(enable = "avx2")]
+            #[allow(clippy::too_many_arguments)]
+            unsafe fn avx2(
+                f: &Finish,
+                r0: &[f64],
+                r1: &[C64],
+                v: &mut [f32],
+                pw: &mut [f32],
+                var: &mut [f32],
+                fl: &mut [u8],
+                fm: &mut [f32],
+            ) {
+                f.row(r0, r1, v, pw, var, fl, fm)
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F (checked above).
+                return unsafe { avx512(self, r0, r1, v, pw, var, fl, fm) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked above).
+                return unsafe { avx2(self, r0, r1, v, pw, var, fl, fm) };
+            }
         }
-        #[target_feature(enable = "avx2")]
-        unsafe fn avx2(r: &[C64], out: &mut [f64]) {
-            run(r, out)
-        }
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F (checked above).
-            return unsafe { avx512(r, out) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            return unsafe { avx2(r, out) };
-        }
+        self.row(r0, r1, v, pw, var, fl, fm)
     }
-    run(r, out)
 }
 
 /// [`LagAcc`] of one pixel's contiguous frames, four frames (8 interleaved f32 parts, one
@@ -497,7 +569,7 @@ fn lag_sums_row(data: &[C32], n_frames: usize, lag: usize, r0: &mut [f64], r1: &
 /// 'same'-size convolution with mirror boundary along x then z (separable kernel). Interior
 /// samples index directly, the mirror rule applies only within a kernel half-width of an edge;
 /// every output is summed over the kernel taps in the same order either way.
-fn smooth<T>(data: &mut [T], tmp: &mut [T], nx: usize, nz: usize, wz: &[f64], wx: &[f64])
+fn smooth<T>(data: &mut Vec<T>, tmp: &mut Vec<T>, nx: usize, nz: usize, wz: &[f64], wx: &[f64])
 where
     T: Copy + Default + Send + Sync + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T>,
 {
@@ -520,11 +592,11 @@ where
                 *o = acc;
             }
         });
-        data.copy_from_slice(tmp);
+        std::mem::swap(data, tmp);
     }
     if wz.len() > 1 {
         // Row by row: output row iz = Σ_k w_k · row(mirror(iz + sz − k)), k ascending.
-        let src: &[T] = data;
+        let src: &[T] = data.as_slice();
         tmp.par_chunks_mut(nx).enumerate().for_each(|(iz, t)| {
             t.fill(T::default());
             for (k, w) in wz.iter().enumerate() {
@@ -534,7 +606,7 @@ where
                 }
             }
         });
-        data.copy_from_slice(tmp);
+        std::mem::swap(data, tmp);
     }
 }
 
@@ -565,7 +637,6 @@ impl DopplerEstimator {
             rax: Vec::new(),
             tmp_r: vec![0.0; n],
             tmp_c: vec![C64::default(); n],
-            phase: Vec::new(),
         })
     }
 
@@ -674,9 +745,22 @@ impl DopplerEstimator {
         out.nyquist = vn;
         let var_scale = 2.0 * (vn / std::f64::consts::PI).powi(2);
         let alias = p.alias_fraction * std::f64::consts::PI;
-        self.phase.resize(n, 0.0);
-        self.phase.par_chunks_mut(nx).zip(self.r1.par_chunks(nx)).for_each(|(o, r)| phases(r, o));
-        let (r0, r1, rax, steps, phase) = (&self.r0, &self.r1, &self.rax, &self.axial_step, &self.phase);
+        let (r0, r1, rax, steps) = (&self.r0, &self.r1, &self.rax, &self.axial_step);
+        if !loupas {
+            let fin = Finish { fc: p.fc, c: p.c, prf: p.prf, lag: lag as f64, var_scale, alias };
+            out.velocity
+                .par_chunks_mut(nx)
+                .zip(out.power.par_chunks_mut(nx))
+                .zip(out.variance.par_chunks_mut(nx))
+                .zip(out.flags.par_chunks_mut(nx))
+                .zip(out.mean_frequency.par_chunks_mut(nx))
+                .enumerate()
+                .for_each(|(iz, ((((v, pw), var), fl), fm))| {
+                    let row = iz * nx..(iz + 1) * nx;
+                    fin.row_simd(&r0[row.clone()], &r1[row], v, pw, var, fl, fm);
+                });
+            return Ok(());
+        }
         let two_pi = 2.0 * std::f64::consts::PI;
         out.velocity
             .par_iter_mut()
@@ -697,7 +781,7 @@ impl DopplerEstimator {
                     *fm = p.fc as f32;
                     return;
                 }
-                let phi = phase[i];
+                let phi = atan2_fast(q1.im, q1.re);
                 let mut f = p.fc;
                 if loupas {
                     let dt = steps[i];
