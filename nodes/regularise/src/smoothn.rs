@@ -454,10 +454,19 @@ impl Smoothn {
             return;
         }
         let (shape, lm, spacing) = (&self.shape, &mut self.lambda_m, &self.spacing);
+        // each axis' terms once (n_a cosines, not one per sample and axis), summed per sample
+        // in axis order as before
+        let terms: Vec<Vec<f64>> = shape
+            .iter()
+            .zip(spacing)
+            .map(|(&n, d)| {
+                (0..n).map(|k| (2.0 - 2.0 * (std::f64::consts::PI * k as f64 / n as f64).cos()) / (d * d)).collect()
+            })
+            .collect();
         self.plan.spectral_indices(|p, k| {
             let mut l = 0.0;
-            for ((k, n), d) in k.iter().zip(shape).zip(spacing) {
-                l += (2.0 - 2.0 * (std::f64::consts::PI * *k as f64 / *n as f64).cos()) / (d * d);
+            for (k, t) in k.iter().zip(&terms) {
+                l += t[*k];
             }
             lm[p] = l.powi(m as i32);
         });
