@@ -342,8 +342,8 @@ fn atan2_fast(y: f64, x: f64) -> f64 {
     }
 }
 
-/// What turns a pixel's (R0, R_L) into its estimate (the lag-1 autocorrelation estimator at
-/// the nominal fc).
+/// What turns a pixel's (R0, R_L) into its estimate (the lag-L autocorrelation estimator at the
+/// nominal fc; Loupas' per-pixel mean frequency stays in `estimate`).
 struct Finish {
     fc: f64,
     c: f64,
