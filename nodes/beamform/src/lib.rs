@@ -17,6 +17,7 @@
 //! Units are SI; x lateral (0 at the array centre), z depth (> 0 into the medium). Doppler
 //! velocities are positive toward the probe. No IPC: nodes and batch tools wrap this library.
 
+pub mod bmode;
 pub mod butterworth;
 pub mod das;
 pub mod error;
@@ -26,6 +27,7 @@ pub mod rf2iq;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 
+pub use bmode::{bmode, mean_envelope_iq, mean_envelope_rf, tgc_gain};
 pub use das::{das_frames, Apodization, CompoundPlan, DasParams, DasPlan, Interpolation, TxWave};
 pub use error::{BeamformError, Result};
 pub use grid::Grid;

@@ -13,7 +13,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray3, PyRead
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use serde::de::DeserializeOwned;
-use sonoflow_beamform::{das_frames, DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
+use sonoflow_beamform::{das_frames, Complex, DasParams, DasPlan, Grid, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
 use sonoflow_doppler::{ClutterParams, DopplerEstimator, DopplerParams, Packet};
 use sonoflow_mcap_io::{McapIoError, McapReader, ReadOptions, SharedMessageIter};
 use sonoflow_messages::MessageType;
@@ -273,6 +273,42 @@ fn iq2doppler<'py>(
         PyArray1::from_vec(py, map.power).reshape(shape)?.into_any(),
         PyArray1::from_vec(py, map.flags).reshape(shape)?.into_any(),
     ))
+}
+
+/// MUST `bmode`: the 8-bit log-compressed (or, below 1 dB, power-law) envelope of I/Q samples
+/// (complex128, any shape, C-contiguous), as a flat uint8 array of the same length.
+#[pyfunction]
+fn bmode<'py>(py: Python<'py>, iq: PyReadonlyArrayDyn<'py, Complex<f64>>, dr: f64) -> PyResult<Bound<'py, PyAny>> {
+    let data = contiguous("IQ", iq.as_slice())?;
+    let img = compute(py, || sonoflow_beamform::bmode(data, dr)).map_err(|e| value_error("bmode", e))?;
+    Ok(PyArray1::from_vec(py, img).into_any())
+}
+
+/// MUST `tgc`'s gain per sample of sample-major I/Q (n_samples, n_lines) complex128.
+#[pyfunction]
+fn tgc_gain_iq<'py>(
+    py: Python<'py>,
+    iq: PyReadonlyArrayDyn<'py, Complex<f64>>,
+    n_lines: usize,
+) -> PyResult<Bound<'py, PyAny>> {
+    let data = contiguous("S", iq.as_slice())?;
+    let gain = compute(py, || {
+        sonoflow_beamform::mean_envelope_iq(data, n_lines).and_then(|c| sonoflow_beamform::tgc_gain(&c))
+    })
+    .map_err(|e| value_error("tgc", e))?;
+    Ok(PyArray1::from_vec(py, gain).into_any())
+}
+
+/// MUST `tgc`'s gain per sample of sample-major real RF (n_samples, n_lines) float64 (envelope
+/// by the analytic signal, as `scipy.signal.hilbert`).
+#[pyfunction]
+fn tgc_gain_rf<'py>(py: Python<'py>, rf: PyReadonlyArrayDyn<'py, f64>, n_lines: usize) -> PyResult<Bound<'py, PyAny>> {
+    let data = contiguous("S", rf.as_slice())?;
+    let gain = compute(py, || {
+        sonoflow_beamform::mean_envelope_rf(data, n_lines).and_then(|c| sonoflow_beamform::tgc_gain(&c))
+    })
+    .map_err(|e| value_error("tgc", e))?;
+    Ok(PyArray1::from_vec(py, gain).into_any())
 }
 
 /// Least-squares vector velocity from Doppler maps (n_looks, nz, nx) float32 (positive toward
@@ -645,6 +681,9 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(das, m)?)?;
     m.add_function(wrap_pyfunction!(dasmtx, m)?)?;
     m.add_function(wrap_pyfunction!(iq2doppler, m)?)?;
+    m.add_function(wrap_pyfunction!(bmode, m)?)?;
+    m.add_function(wrap_pyfunction!(tgc_gain_iq, m)?)?;
+    m.add_function(wrap_pyfunction!(tgc_gain_rf, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;
