@@ -77,6 +77,9 @@ enum Cmd {
     /// power, variance, flags .npy.
     #[command(name = "iq2doppler", alias = "doppler")]
     Iq2doppler(sonoflow_tools::beamform::DopplerArgs),
+    /// B-mode batch tool (MUST `bmode`, optionally after `tgc`): I/Q .npy (depth first) → uint8
+    /// .npy of the same shape, optionally a PNG.
+    Bmode(sonoflow_tools::bmode::BmodeArgs),
     /// Platelet suspension (paper 2): resolved Stokes training data, network training.
     Platelet {
         #[command(subcommand)]
@@ -195,6 +198,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Rf2iq(a) => sonoflow_tools::beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow_tools::beamform::run_das(&a),
         Cmd::Iq2doppler(a) => sonoflow_tools::beamform::run_iq2doppler(&a),
+        Cmd::Bmode(a) => sonoflow_tools::bmode::run_bmode(&a),
         Cmd::Stability(a) => sonoflow_stability::run(&a),
         Cmd::Platelet { what } => sonoflow_tools::platelet::run_platelet(&what),
         Cmd::Bench { what } => sonoflow_tools::bench::run_bench(what, registry),

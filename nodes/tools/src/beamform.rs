@@ -166,7 +166,7 @@ fn need(v: Option<f64>, key: &str, what: &str, param: &Path) -> anyhow::Result<f
 }
 
 /// Checks that `--out` ends in `.npy` and that its sidecar would not overwrite an input.
-fn check_out(out: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
+pub(crate) fn check_out(out: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
     if out.extension().and_then(|e| e.to_str()) != Some("npy") {
         anyhow::bail!("--out {}: must end in .npy", out.display());
     }
@@ -184,7 +184,7 @@ fn check_out(out: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
 }
 
 /// The JSON sidecar next to an input `.npy` (`x.npy` → `x.json`), if there is one.
-fn read_sidecar(input: &Path, flag: &str) -> anyhow::Result<Option<(PathBuf, serde_json::Value)>> {
+pub(crate) fn read_sidecar(input: &Path, flag: &str) -> anyhow::Result<Option<(PathBuf, serde_json::Value)>> {
     let side = input.with_extension("json");
     if !side.is_file() {
         return Ok(None);
@@ -260,7 +260,7 @@ fn to_c32(data: &[sonoflow_beamform::Complex<f64>]) -> Vec<C32> {
     data.iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
 }
 
-fn write_sidecar(out: &Path, v: &serde_json::Value) -> anyhow::Result<PathBuf> {
+pub(crate) fn write_sidecar(out: &Path, v: &serde_json::Value) -> anyhow::Result<PathBuf> {
     let side = out.with_extension("json");
     sonoflow_fileio::write_atomic(&side, serde_json::to_string_pretty(v)?.as_bytes())
         .map_err(|e| anyhow::anyhow!("{}: {e}", side.display()))?;

@@ -1,0 +1,195 @@
+#![allow(clippy::unwrap_used)]
+//! `sonoflow bmode` as a user runs it: a synthetic I/Q image whose envelope decays by a known
+//! amount with depth, through the tool, compared with the library called directly (the same
+//! bytes), with an independent check of what time-gain compensation does to the decay, the PNG,
+//! and bad inputs (an error naming the flag, no file written).
+
+mod common;
+use common::bin;
+use sonoflow_beamform::Complex;
+use sonoflow_fileio::npy;
+use std::path::Path;
+use std::process::Command;
+
+fn cli(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(bin()).arg("bmode").args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Deterministic uniform numbers in [-1, 1).
+fn noise(seed: u64, n: usize) -> Vec<f64> {
+    let mut state = seed;
+    (0..n)
+        .map(|_| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            2.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+        })
+        .collect()
+}
+
+/// Speckle-like I/Q (nz, nx) whose envelope decays as exp(−iz / decay) with depth, rounded to
+/// complex64 as the file holds it.
+fn decaying_iq(nz: usize, nx: usize, decay: f64) -> Vec<Complex<f64>> {
+    let (re, im) = (noise(3, nz * nx), noise(4, nz * nx));
+    (0..nz * nx)
+        .map(|i| {
+            let a = (-((i / nx) as f64) / decay).exp();
+            Complex::new(f64::from((a * re[i]) as f32), f64::from((a * im[i]) as f32))
+        })
+        .collect()
+}
+
+fn write_iq(path: &Path, shape: &[usize], iq: &[Complex<f64>]) {
+    let c: Vec<_> = iq.iter().map(|z| sonoflow_beamform::C32::new(z.re as f32, z.im as f32)).collect();
+    npy::write_c64(path, shape, &c).unwrap();
+}
+
+fn read_u8(path: &Path) -> (Vec<usize>, Vec<u8>) {
+    let a = npy::read(path).unwrap();
+    (a.shape, a.data.iter().map(|v| *v as u8).collect())
+}
+
+/// Mean of the B-mode bytes over rows [r0, r1).
+fn band_mean(img: &[u8], nx: usize, r0: usize, r1: usize) -> f64 {
+    let b = &img[r0 * nx..r1 * nx];
+    b.iter().map(|v| f64::from(*v)).sum::<f64>() / b.len() as f64
+}
+
+#[test]
+fn bmode_tool_matches_the_library_and_tgc_flattens_a_known_decay() {
+    let dir = tempfile::tempdir().unwrap();
+    let (nz, nx, decay) = (160, 48, 40.0);
+    let iq = decaying_iq(nz, nx, decay);
+    let iq_path = dir.path().join("img.npy");
+    write_iq(&iq_path, &[nz, nx], &iq);
+    // the sidecar `sonoflow das` writes: dz half of dx → columns doubled in the PNG
+    std::fs::write(
+        dir.path().join("img.json"),
+        r#"{"grid": {"x0": -0.005, "z0": 0.01, "dx": 2e-4, "dz": 1e-4, "nx": 48, "nz": 160}}"#,
+    )
+    .unwrap();
+
+    // 1. Plain B-mode at DR 50: the library's bytes; the decay (8.686 dB per `decay` rows) shows.
+    let out = dir.path().join("b.npy");
+    let png_path = dir.path().join("b.png");
+    let (code, stdout, err) = cli(&["--iq", s(&iq_path), "--dr", "50", "--out", s(&out), "--png", s(&png_path)]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("DR 50 dB"), "{stdout}");
+    let (shape, img) = read_u8(&out);
+    assert_eq!(shape, vec![nz, nx]);
+    assert_eq!(img, sonoflow_beamform::bmode(&iq, 50.0).unwrap());
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("json")).unwrap()).unwrap();
+    assert_eq!(side["DR_dB"], 50.0);
+    assert_eq!(side["tgc"], false);
+    let max = iq.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    assert!((side["max_envelope"].as_f64().unwrap() - max).abs() <= 1e-12 * max);
+    // Rows 10–30 and 130–150 are 120 rows apart: 120/40 · 8.686 = 26.1 dB → 255·26.1/50 = 133
+    // grey levels between the band means (the speckle's log-mean is the same in both bands; 20
+    // rows × 48 columns of it average to within a few levels).
+    let drop = band_mean(&img, nx, 10, 30) - band_mean(&img, nx, 130, 150);
+    let expected = 255.0 * (120.0 / decay * 20.0 * std::f64::consts::E.log10()) / 50.0;
+    assert!((drop - expected).abs() < 12.0, "grey-level drop {drop:.1}, expected {expected:.1}");
+
+    // The PNG: 96 × 160 (columns doubled for square pixels), grey, the same bytes.
+    let decoder = png::Decoder::new(std::fs::File::open(&png_path).unwrap());
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (2 * nx as u32, nz as u32));
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    for (r, c) in [(0, 0), (17, 5), (159, 47), (80, 23)] {
+        let p = &buf[(r * 2 * nx + 2 * c + 1) * 3..][..3];
+        assert_eq!(p, [img[r * nx + c]; 3], "pixel ({r}, {c})");
+    }
+
+    // 2. With --tgc: the library's gain applied per row, then the same compression; the decay is
+    // gone (band means within a few levels instead of 133 apart).
+    let out_t = dir.path().join("t.npy");
+    let (code, stdout, err) = cli(&["--iq", s(&iq_path), "--dr", "50", "--tgc", "--out", s(&out_t)]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("tgc"), "{stdout}");
+    let env = sonoflow_beamform::mean_envelope_iq(&iq, nx).unwrap();
+    let gain = sonoflow_beamform::tgc_gain(&env).unwrap();
+    let compensated: Vec<_> = iq.iter().enumerate().map(|(i, z)| z * gain[i / nx]).collect();
+    let (_, img_t) = read_u8(&out_t);
+    assert_eq!(img_t, sonoflow_beamform::bmode(&compensated, 50.0).unwrap());
+    let flat = band_mean(&img_t, nx, 10, 30) - band_mean(&img_t, nx, 130, 150);
+    assert!(flat.abs() < 12.0, "after tgc the bands still differ by {flat:.1} levels");
+    // the gain over the image (159 rows) is the decay's 34.5 dB, within the fit's noise
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_t.with_extension("json")).unwrap()).unwrap();
+    let g = side["tgc_gain_dB_first_last"].as_array().unwrap();
+    let span = g[1].as_f64().unwrap() - g[0].as_f64().unwrap();
+    let expected_db = 159.0 / decay * 20.0 * std::f64::consts::E.log10();
+    assert!((span - expected_db).abs() < 2.0, "tgc span {span:.2} dB, expected {expected_db:.2}");
+
+    // 3. A packet (nz, nx, frames): one maximum over all frames, as MUST; PNG of frame 0.
+    let frames = 3;
+    let packet: Vec<_> = (0..nz * nx * frames).map(|i| iq[i / frames] * (1.0 + (i % frames) as f64)).collect();
+    let p_path = dir.path().join("packet.npy");
+    write_iq(&p_path, &[nz, nx, frames], &packet);
+    let out_p = dir.path().join("p.npy");
+    let (code, _, err) = cli(&["--iq", s(&p_path), "--out", s(&out_p), "--png", s(&dir.path().join("p.png"))]);
+    assert_eq!(code, 0, "{err}");
+    let (shape, img_p) = read_u8(&out_p);
+    assert_eq!(shape, vec![nz, nx, frames]);
+    assert_eq!(img_p, sonoflow_beamform::bmode(&packet, 40.0).unwrap());
+}
+
+fn fails(args: &[&str], out: &Path, needles: &[&str]) {
+    let (code, _, err) = cli(args);
+    assert_eq!(code, 1, "{args:?}: expected exit code 1; stderr: {err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: stderr lacks {n:?}: {err}");
+    }
+    assert!(!out.exists(), "{args:?}: output written on error");
+    assert!(!out.with_extension("json").exists(), "{args:?}: sidecar written on error");
+}
+
+#[test]
+fn bmode_tool_rejects_bad_input_with_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let iq = decaying_iq(40, 8, 20.0);
+    let ok = dir.path().join("iq.npy");
+    write_iq(&ok, &[40, 8], &iq);
+    let out = dir.path().join("o.npy");
+    let (o, k) = (s(&out), s(&ok));
+    for dr in ["0", "-3", "nan", "inf"] {
+        fails(&["--iq", k, "--dr", dr, "--out", o], &out, &["--dr", "finite and > 0"]);
+    }
+    fails(&["--iq", k, "--out", s(&dir.path().join("o.txt"))], &dir.path().join("o.txt"), &["--out", ".npy"]);
+    fails(&["--iq", k, "--out", o, "--png", s(&dir.path().join("o.jpg"))], &out, &["--png", ".png"]);
+    // NaN in the data
+    let mut bad = iq.clone();
+    bad[17] = Complex::new(f64::NAN, 0.0);
+    let nan = dir.path().join("nan.npy");
+    write_iq(&nan, &[40, 8], &bad);
+    fails(&["--iq", s(&nan), "--out", o], &out, &["--iq", "non-finite value at flat index 17"]);
+    // real data is not I/Q
+    let real = dir.path().join("real.npy");
+    npy::write_f64(&real, &[40, 8], &vec![1.0; 320]).unwrap();
+    fails(&["--iq", s(&real), "--out", o], &out, &["--iq"]);
+    // --tgc needs lines; a PNG needs 2 or 3 axes
+    let line = dir.path().join("line.npy");
+    write_iq(&line, &[40], &iq[..40]);
+    fails(&["--iq", s(&line), "--tgc", "--out", o], &out, &["--tgc", "≥ 2 axes"]);
+    let four = dir.path().join("four.npy");
+    write_iq(&four, &[5, 2, 4, 8], &iq);
+    fails(&["--iq", s(&four), "--out", o, "--png", s(&dir.path().join("f.png"))], &out, &["--png", "2 axes"]);
+    // too few samples along time for the fit
+    let short = dir.path().join("short.npy");
+    write_iq(&short, &[2, 8], &iq[..16]);
+    fails(&["--iq", s(&short), "--tgc", "--out", o], &out, &["--tgc", "at least 3 samples"]);
+    // the output would overwrite the input
+    fails(&["--iq", k, "--out", k], &dir.path().join("nothing.npy"), &["would overwrite the input"]);
+    assert!(ok.exists());
+}
