@@ -311,6 +311,45 @@ fn tgc_gain_rf<'py>(py: Python<'py>, rf: PyReadonlyArrayDyn<'py, f64>, n_lines: 
     Ok(PyArray1::from_vec(py, gain).into_any())
 }
 
+/// A seeded 2-D speckle phantom (MUST `genscat`, `sonoflow_simus::phantom`): region width ×
+/// height from depth `z0`, `meandist`, inclusions as JSON (a list of `{x, z, radius, level_db?}`),
+/// an optional echogenicity image (nl, nc) float64 with MUST's `g`. Returns (x, z, RC) float64.
+#[pyfunction]
+#[pyo3(signature = (width, height, z0, meandist, seed, inclusions_json, image=None, g=40.0))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn genscat<'py>(
+    py: Python<'py>,
+    width: f64,
+    height: f64,
+    z0: f64,
+    meandist: f64,
+    seed: u64,
+    inclusions_json: &str,
+    image: Option<PyReadonlyArrayDyn<'py, f64>>,
+    g: f64,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let inclusions: Vec<sonoflow_simus::Inclusion> = from_json("inclusions", inclusions_json)?;
+    let image = match &image {
+        Some(im) => {
+            let [nl, nc] = im.shape()[..] else {
+                return Err(value_error(
+                    "I",
+                    format!("expected 2 axes (rows = depth, columns), got shape {:?}", im.shape()),
+                ));
+            };
+            Some(sonoflow_simus::phantom::Echogenicity { data: contiguous("I", im.as_slice())?.to_vec(), nl, nc, g })
+        }
+        None => None,
+    };
+    let params = sonoflow_simus::PhantomParams { width, height, z0, meandist, seed, inclusions, image };
+    let ph = compute(py, || sonoflow_simus::genscat(&params)).map_err(|e| value_error("genscat", e))?;
+    Ok((
+        PyArray1::from_vec(py, ph.x).into_any(),
+        PyArray1::from_vec(py, ph.z).into_any(),
+        PyArray1::from_vec(py, ph.rc).into_any(),
+    ))
+}
+
 /// Least-squares vector velocity from Doppler maps (n_looks, nz, nx) float32 (positive toward
 /// the probe) with the nominal plane-wave projections of (tx, rx) angle pairs (rad), optional
 /// flags (n_looks, nz, nx) uint8 (bit 0: no estimate) and per-look weights. Returns (vx, vz,
@@ -684,6 +723,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(bmode, m)?)?;
     m.add_function(wrap_pyfunction!(tgc_gain_iq, m)?)?;
     m.add_function(wrap_pyfunction!(tgc_gain_rf, m)?)?;
+    m.add_function(wrap_pyfunction!(genscat, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;

@@ -9,7 +9,7 @@ import numpy as np
 from . import _native
 from ._param import Options, Param, canonical, dumps, number, probe_json
 
-__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn"]
+__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat"]
 
 
 def _array(a, name, dtype, *, ndim=None, allow_nan=False):
@@ -537,3 +537,74 @@ def tgc(S):
         gain = _native.tgc_gain_rf(_array(s2, "S", np.float64), s2.shape[1])
     C = gain.reshape(-1, 1)
     return (s2 * C).reshape(s.shape), C
+
+
+def genscat(roidim, meandist, I=None, g=None, *, seed=0, inclusions=None, z0=0.0):
+    """A 2-D speckle phantom (MUST ``genscat``): ``xs, ys, zs, RC = genscat([width, height],
+    meandist_or_param, I=None, g=None)``. Scatterers on a square grid of step
+    ``meandist/sqrt(2/5)`` jittered by ± half a step, over x in (−width/2, width/2) and z in
+    (z0, z0 + height) (MUST: z0 = 0), so the mean distance to the nearest neighbour is ≈
+    ``meandist`` and the density 0.4/meandist²; ``meandist`` may be a ``param`` (MUST's
+    ``c/(fc(1 + bandwidth/200))``, bandwidth 75 % and c 1540 m/s by default). ``RC`` is Rayleigh of
+    mean 1, times the echogenicity image ``I`` (2-D, ≥ 0, rows = depth) when given, as MUST
+    (``10^(g/20·(I/max − 1))`` for g > 1 dB, default 40; ``(I/max)^(1/g)`` for g ≤ 1); a NaN width or
+    height is taken from I's aspect ratio. ``ys`` is zeros.
+
+    sonoflow's additions: ``seed`` (the same seed gives the same phantom; another moves every
+    scatterer: PyMUST draws from numpy's global generator), ``inclusions`` (a list of dicts
+    ``{"x", "z", "radius", "level_db"}``, level in dB relative to the background, absent, None or
+    −inf: anechoic; a later inclusion overrides an earlier one) and ``z0``. Differences: 2-D only;
+    the image is sampled at pixel centres with its edge pixels extended (PyMUST's interpolation
+    gives 0 in the outer half pixel and shifts x by half a pixel); the amplitudes are Rayleigh
+    with or without an image (PyMUST multiplies an image's levels by hypot of two uniform
+    numbers); no random reordering."""
+    r = np.asarray(roidim, dtype=float).reshape(-1)
+    if r.size == 3:
+        raise ValueError("roidim: 3-D phantoms ([width, height, depth]) are not supported; give [width, height]")
+    if r.size != 2:
+        raise ValueError(f"roidim: expected [width, height] (m), got {roidim!r}")
+    width, height = float(r[0]), float(r[1])
+    if hasattr(meandist, "keys"):
+        p = canonical(meandist, "param")
+        fc = number(p, "fc", "param", required=True, lo=0.0, lo_open=True)
+        bw = number(p, "bandwidth", "param", default=75.0, lo=0.0, hi=200.0, lo_open=True)
+        c = number(p, "c", "param", default=1540.0, lo=0.0, lo_open=True)
+        if bw >= 200.0:
+            raise ValueError(f"param.bandwidth = {bw} must be in (0, 200) %")
+        md = c / (fc * (1 + bw / 200))
+    else:
+        if isinstance(meandist, (bool, str, bytes)) or not np.isscalar(meandist):
+            raise TypeError(f"meandist: expected a positive number or a param, got {type(meandist).__name__}")
+        md = float(meandist)
+        if not (math.isfinite(md) and md > 0):
+            raise ValueError(f"meandist = {md} must be finite and > 0 (m)")
+    image = None
+    if I is not None:
+        image = _array(I, "I", np.float64, ndim=2)
+        if np.any(image < 0):
+            raise ValueError("I: must be non-negative")
+        m, n = image.shape
+        if not math.isfinite(width) and math.isfinite(height):
+            width = n * height / m
+        elif not math.isfinite(height) and math.isfinite(width):
+            height = m * width / n
+    elif g is not None:
+        raise ValueError("g: only used with an image I")
+    for name, v in (("roidim[0] (width)", width), ("roidim[1] (height)", height)):
+        if not math.isfinite(v):
+            raise ValueError(f"{name} = {v}: must be finite (NaN only with an image I, the other finite)")
+    incl = []
+    for k, inc in enumerate(inclusions or []):
+        if not hasattr(inc, "keys"):
+            raise TypeError(f"inclusions[{k}]: expected a dict with x, z, radius, level_db")
+        unknown = set(inc) - {"x", "z", "radius", "level_db"}
+        if unknown:
+            raise ValueError(f"inclusions[{k}]: unknown field(s) {sorted(unknown)} (x, z, radius, level_db)")
+        d = {key: number(inc, key, f"inclusions[{k}]", required=True) for key in ("x", "z", "radius")}
+        lv = inc.get("level_db")
+        if lv is not None and not (isinstance(lv, (int, float)) and lv == -math.inf):
+            d["level_db"] = number(inc, "level_db", f"inclusions[{k}]")
+        incl.append(d)
+    x, z, rc = _native.genscat(width, height, float(z0), md, int(seed), dumps(incl), image,
+                               40.0 if g is None else float(g))
+    return x, np.zeros_like(x), z, rc
