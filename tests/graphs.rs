@@ -510,13 +510,30 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
         assert!(report.contains("## Error against ground truth") && report.contains("| 0 | regularised |"), "{report}");
         assert!(report.contains("Per look (the packet)"), "{report}");
-        // The figures: stage times (launcher), colour Doppler maps of both receive angles,
-        // vectors of both fields over the truth, error histograms (evaluator), all in report.md.
+        // The figures: stage times (launcher), colour Doppler maps of both receive angles, the
+        // B-mode image, vectors of both fields over the truth, error histograms (evaluator), all
+        // in report.md.
         let mut figs = checked_figures(dir.path());
         figs.sort();
-        assert_eq!(figs, ["doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]);
+        assert_eq!(
+            figs,
+            ["bmode.png", "doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]
+        );
         let ev_figs: Vec<&str> = ev.figures.iter().map(|f| f.path.as_str()).collect();
-        assert_eq!(ev_figs, ["figures/doppler_maps.png", "figures/vector_field.png", "figures/error_histograms.png"]);
+        assert_eq!(
+            ev_figs,
+            [
+                "figures/doppler_maps.png",
+                "figures/bmode.png",
+                "figures/vector_field.png",
+                "figures/error_histograms.png"
+            ]
+        );
+        // The B-mode figure is of packet 0, the look nearest normal incidence (the quickstart's
+        // looks are tx 0°, rx ∓15°: both 15° off, the first received wins), frame 0, at 40 dB.
+        let bm = ev.figures.iter().find(|f| f.path.ends_with("bmode.png")).unwrap();
+        assert!(bm.title.starts_with("B-mode, packet 0"), "{}", bm.title);
+        assert!(bm.caption.contains("40 dB") && bm.caption.contains("true vessel wall"), "{}", bm.caption);
         assert!(ev.warnings.is_empty(), "{:?}", ev.warnings);
         // The histograms have a row of panels (270 px) per field.
         let hist = ev.figures.iter().find(|f| f.path.ends_with("error_histograms.png")).unwrap();

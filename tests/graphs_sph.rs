@@ -189,6 +189,7 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
     assert_eq!(
         figs,
         [
+            "bmode.png",
             "doppler_maps-subband-divfree.png",
             "doppler_maps.png",
             "error_histograms-subband-divfree.png",
@@ -235,7 +236,7 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
     let want: Vec<String> = ["autocorrelation", "loupas"]
         .iter()
         .flat_map(|l| ["doppler_maps", "error_histograms", "vector_field"].map(|f| format!("{f}-{l}.png")))
-        .chain(std::iter::once("stage_times.png".to_string()))
+        .chain(["stage_times.png".to_string(), "bmode-autocorrelation.png".to_string()])
         .collect();
     let mut want = want;
     want.sort();

@@ -26,11 +26,14 @@ pub struct EvaluatorParams {
     pub label: String,
     /// Draw the report's figures into `<run>/figures/` at the end (default true).
     pub figures: bool,
+    /// Dynamic range (dB) of the B-mode figure drawn from the `iq` input, in [1, 120]. Default 40
+    /// (MUST `bmode`'s).
+    pub bmode_dr: f64,
 }
 
 impl Default for EvaluatorParams {
     fn default() -> Self {
-        Self { margin: 2, label: String::new(), figures: true }
+        Self { margin: 2, label: String::new(), figures: true, bmode_dr: 40.0 }
     }
 }
 
@@ -48,6 +51,9 @@ impl EvaluatorParams {
     pub fn validate(&self) -> Result<(), String> {
         if self.margin > 10 {
             return Err(format!("margin = {} is out of range: 0 ..= 10", self.margin));
+        }
+        if !(self.bmode_dr.is_finite() && (1.0..=120.0).contains(&self.bmode_dr)) {
+            return Err(format!("bmode_dr = {} is out of range: [1, 120] dB", self.bmode_dr));
         }
         if self.label.len() > 64 || !self.label.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
             return Err(format!(
@@ -334,6 +340,18 @@ pub struct FigureData {
     pub last: Option<(u32, Field, BTreeMap<String, Field>)>,
     /// Colour Doppler maps by packet (the most recent few).
     pub maps: BTreeMap<u32, Vec<Map>>,
+    /// B-mode images by packet (the most recent few), each the first frame of a packet's look
+    /// nearest to normal incidence.
+    pub bmodes: BTreeMap<u32, Bmode>,
+}
+
+/// A B-mode image for the report: its title, grid, MUST `bmode` bytes and dynamic range (dB).
+#[derive(Clone, Debug)]
+pub struct Bmode {
+    pub title: String,
+    pub grid: GridV1,
+    pub image: Vec<u8>,
+    pub dr: f64,
 }
 
 impl FigureData {
@@ -344,6 +362,14 @@ impl FigureData {
             }
             Some((p, _, _)) if *p > packet => {}
             _ => self.last = Some((packet, truth.clone(), BTreeMap::from([(name.to_string(), est)]))),
+        }
+    }
+
+    /// Keeps a packet's B-mode image (the most recent 4 packets).
+    pub fn keep_bmode(&mut self, packet: u32, b: Bmode) {
+        self.bmodes.insert(packet, b);
+        while self.bmodes.len() > 4 {
+            self.bmodes.pop_first();
         }
     }
 
@@ -421,6 +447,18 @@ pub fn write_figures(
                 .filter(|(p, t, _)| p == packet && maps.first().is_some_and(|m| m.0.grid == t.0.grid))
                 .and_then(|(_, t, _)| plane_of(&t.0, &t.1, plane::MASK));
             figures::doppler_maps(dir, label, &format!("Colour Doppler, packet {packet}{tag}"), &panels, outline)
+        }));
+    }
+    // B-mode: the packet of the Doppler maps (else the last evaluated, else the latest).
+    let want = maps.map(|(p, _)| *p).or(last.map(|(p, _, _)| *p));
+    let bmode = want.and_then(|p| data.bmodes.get_key_value(&p)).or_else(|| data.bmodes.last_key_value());
+    if let Some((packet, b)) = bmode {
+        keep(figures::guarded("bmode", || {
+            let outline = last
+                .filter(|(p, t, _)| p == packet && t.0.grid == b.grid)
+                .and_then(|(_, t, _)| plane_of(&t.0, &t.1, plane::MASK));
+            let panel = figures::BmodePanel { title: b.title.clone(), grid: b.grid, image: &b.image, dr: b.dr };
+            figures::bmode_figure(dir, label, &format!("B-mode, packet {packet}{tag}"), &panel, outline)
         }));
     }
     if let Some((packet, truth, fields)) = last {

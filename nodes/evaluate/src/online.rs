@@ -84,6 +84,14 @@ impl OnlineEvaluation {
         }
     }
 
+    /// A B-mode image of `packet` for the report's figure (kept when figures are on; the most
+    /// recent 4 packets).
+    pub fn add_bmode(&mut self, packet: u32, b: crate::evaluation::Bmode) {
+        if self.params.figures {
+            self.fig.keep_bmode(packet, b);
+        }
+    }
+
     /// Evaluates every estimate and map whose packet's truth has arrived; returns the estimates
     /// evaluated, in (packet, name) order.
     pub fn evaluate_ready(&mut self) -> anyhow::Result<Vec<Evaluated>> {

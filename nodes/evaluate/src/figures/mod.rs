@@ -16,11 +16,13 @@ use serde::{Deserialize, Serialize};
 use sonoflow_messages::GridV1;
 use std::path::Path;
 
+mod bmode;
 mod doppler_maps;
 mod histograms;
 mod lines;
 mod stages;
 mod vectors;
+pub use bmode::*;
 pub use doppler_maps::*;
 pub use histograms::*;
 pub use lines::*;
@@ -34,6 +36,7 @@ pub const DOPPLER: &str = "doppler_maps.png";
 pub const VECTORS: &str = "vector_field.png";
 pub const ERRORS: &str = "error_histograms.png";
 pub const STAGES: &str = "stage_times.png";
+pub const BMODE: &str = "bmode.png";
 
 /// One written figure, as listed in `report.json` / `evaluation.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -531,6 +534,36 @@ mod tests {
         let p = maps[0].pixel(x_edge, z);
         let near: Vec<RGBColor> = (-1..=1).map(|d| px(&img, (p.0, p.1 + d as f64))).collect();
         assert!(near.contains(&WHITE), "{near:?}");
+    }
+
+    #[test]
+    fn bmode_figure_draws_each_cell_in_its_grey_and_the_vessel_outline() {
+        let dir = tempfile::tempdir().unwrap();
+        let n = 40;
+        let g = grid(n as u32);
+        // a ramp across x: byte = 6·ix (0 … 234)
+        let image: Vec<u8> = (0..n * n).map(|i| (6 * (i % n)) as u8).collect();
+        let panel = BmodePanel { title: "tx 0°".into(), grid: g, image: &image, dr: 50.0 };
+        let (fig, m) = bmode_figure_mapped(dir.path(), "", "B-mode", &panel, Some(&disk(n))).unwrap();
+        assert_eq!(fig.path, "figures/bmode.png");
+        assert!(fig.caption.contains("50 dB") && fig.caption.contains("vessel wall"), "{}", fig.caption);
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        for (ix, iz) in [(0, 0), (5, 30), (17, 20), (39, 39), (25, 3)] {
+            let (x, z) = cell(&g, ix, iz);
+            let p = m.pixel(x, z);
+            assert_eq!(px(&img, p), bmode_grey((6 * ix) as u8), "cell ({ix}, {iz})");
+        }
+        // the outline in red on the cell edge between inside and outside of the disk
+        let (x_edge, z) = (cell(&g, 19, 9).0, cell(&g, 19, 9).1 + 0.25);
+        let p = m.pixel(x_edge, z);
+        let near: Vec<RGBColor> = (-1..=1).map(|d| px(&img, (p.0, p.1 + d as f64))).collect();
+        assert!(near.contains(&RGBColor(255, 64, 64)), "{near:?}");
+        // a wrong size or range is refused
+        let short = BmodePanel { title: "t".into(), grid: g, image: &image[1..], dr: 50.0 };
+        assert!(bmode_figure(dir.path(), "", "B", &short, None).is_err());
+        let bad = BmodePanel { title: "t".into(), grid: g, image: &image, dr: f64::NAN };
+        assert!(bmode_figure(dir.path(), "", "B", &bad, None).is_err());
     }
 
     #[test]
