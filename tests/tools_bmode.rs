@@ -342,3 +342,71 @@ fn genscat_tool_rejects_bad_input_with_clear_errors() {
         assert!(!out.exists() && !out.with_extension("json").exists(), "{a:?}: written on error");
     }
 }
+
+#[test]
+fn pfield_tool_matches_the_library_and_rejects_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("f.npy");
+    let grid = "-0.004,0.0004,21,0.002,0.001,19";
+    let (code, stdout, err) = run(
+        "pfield",
+        &[
+            "--param",
+            "L11-5v",
+            "--grid",
+            grid,
+            "--focus=-0.001,0.012",
+            "--out",
+            s(&out),
+            "--png",
+            s(&dir.path().join("f.png")),
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("focused at (-0.001, 0.012) m"), "{stdout}");
+    let probe = sonoflow_simus::Probe::preset("L11-5v").unwrap();
+    let medium = sonoflow_simus::Medium::default();
+    let tx = sonoflow_simus::Transmit::focused(&probe, medium.c, -0.001, 0.012).unwrap();
+    let (mut xs, mut zs) = (Vec::new(), Vec::new());
+    for iz in 0..19 {
+        for ix in 0..21 {
+            xs.push(-0.004 + ix as f64 * 0.0004);
+            zs.push(0.002 + iz as f64 * 0.001);
+        }
+    }
+    let lib = sonoflow_simus::pfield(&probe, &medium, &tx, &xs, &zs, &Default::default()).unwrap();
+    let file = npy::read(&out).unwrap();
+    assert_eq!(file.shape, vec![19, 21]);
+    assert_eq!(file.data, lib.rms);
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("json")).unwrap()).unwrap();
+    assert_eq!(side["n_freq"].as_u64().unwrap() as usize, lib.n_freq);
+    // the focus is where the field peaks (row of z = 12 mm, column of x = −1.2 … −0.8 mm)
+    let imax = (0..file.data.len()).max_by(|a, b| file.data[*a].total_cmp(&file.data[*b])).unwrap();
+    assert!(
+        (xs[imax] + 0.001).abs() <= 0.0004 && (zs[imax] - 0.012).abs() <= 0.002,
+        "peak at ({}, {})",
+        xs[imax],
+        zs[imax]
+    );
+
+    let o = s(&out);
+    std::fs::remove_file(&out).unwrap();
+    std::fs::remove_file(out.with_extension("json")).unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (&["--param", "L11-5v", "--grid", grid], "give the transmit"),
+        (&["--param", "L11-5v", "--grid", grid, "--tilt-deg", "3", "--focus", "0,0.01"], "one of"),
+        (&["--param", "L11-5v", "--grid", grid, "--focus", "0,0"], "Z must be"),
+        (&["--param", "L11-5v", "--grid", "1,2,3", "--tilt-deg", "0"], "--grid"),
+        (&["--param", "no-probe", "--grid", grid, "--tilt-deg", "0"], "--param"),
+        (&["--param", "L11-5v", "--grid", grid, "--tx-delay", "0,0"], "transmit.delays"),
+    ];
+    for (args, needle) in cases {
+        let mut a = args.to_vec();
+        a.extend(["--out", o]);
+        let (code, _, err) = run("pfield", &a);
+        assert_eq!(code, 1, "{a:?}: {err}");
+        assert!(err.contains(needle), "{a:?}: stderr lacks {needle:?}: {err}");
+        assert!(!out.exists(), "{a:?}: written on error");
+    }
+}

@@ -65,6 +65,8 @@ enum Cmd {
     Clean,
     /// SIMUS batch tool: scatterers + MUST parameters → RF (.npy) and a JSON sidecar.
     Simus(sonoflow_tools::simus::SimusArgs),
+    /// Pressure field of one transmit (MUST `pfield`) on a grid → RMS pressure .npy (nz, nx).
+    Pfield(sonoflow_tools::pfield::PfieldArgs),
     /// Speckle phantom (MUST `genscat`, seeded, with inclusions) → scatterers .npy (n, 3) for `simus`.
     Genscat(sonoflow_tools::simus::GenscatArgs),
     /// Run a scene over a grid of settings; error (from its evaluator) against run time, Pareto front.
@@ -200,6 +202,7 @@ fn real_main(cli: Cli) -> anyhow::Result<i32> {
         Cmd::Rf2iq(a) => sonoflow_tools::beamform::run_rf2iq(&a),
         Cmd::Das(a) => sonoflow_tools::beamform::run_das(&a),
         Cmd::Iq2doppler(a) => sonoflow_tools::beamform::run_iq2doppler(&a),
+        Cmd::Pfield(a) => sonoflow_tools::pfield::run_pfield(&a),
         Cmd::Genscat(a) => sonoflow_tools::simus::run_genscat(&a),
         Cmd::Bmode(a) => sonoflow_tools::bmode::run_bmode(&a),
         Cmd::Stability(a) => sonoflow_stability::run(&a),

@@ -151,6 +151,25 @@ fn simus<'py>(
     Ok((arr.into_any(), fs, t0))
 }
 
+/// MUST PFIELD (RMS pressure of one transmit) at points `x`, `z` (float64). `param_json` is a MUST
+/// param (`TXdelay` set), `options_json` a `PfieldOptions`. Returns (RP float64, IDX bool, df).
+#[pyfunction]
+fn pfield<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray1<'py, f64>,
+    z: PyReadonlyArray1<'py, f64>,
+    param_json: &str,
+    options_json: &str,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
+    let parts = from_json::<MustParam>("param", param_json)?.into_parts().map_err(|e| value_error("param", e))?;
+    let options: sonoflow_simus::PfieldOptions = from_json("options", options_json)?;
+    let transmit = parts.transmit.ok_or_else(|| PyValueError::new_err("delays: missing (param.TXdelay)"))?;
+    let (xs, zs) = (contiguous("x", x.as_slice())?, contiguous("z", z.as_slice())?);
+    let field = compute(py, || sonoflow_simus::pfield(&parts.probe, &parts.medium, &transmit, xs, zs, &options))
+        .map_err(|e| value_error("pfield", e))?;
+    Ok((PyArray1::from_vec(py, field.rms).into_any(), PyArray1::from_vec(py, field.idx).into_any(), field.df))
+}
+
 /// RF (n_samples, n_channels) float32/float64, sample-major → I/Q (n_channels, n_samples)
 /// complex64, channel-major. `params_json` is an `Rf2IqParams` (fc, fs, bandwidth, t0, order).
 #[pyfunction]
@@ -724,6 +743,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tgc_gain_iq, m)?)?;
     m.add_function(wrap_pyfunction!(tgc_gain_rf, m)?)?;
     m.add_function(wrap_pyfunction!(genscat, m)?)?;
+    m.add_function(wrap_pyfunction!(pfield, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;

@@ -107,32 +107,7 @@ impl Simus {
         medium.validate()?;
         options.validate(probe.fc)?;
         let (fc, c) = (probe.fc, medium.c);
-        let width = probe.element_width();
-        let m = match options.element_splitting {
-            Some(m) => m as usize,
-            None => {
-                let lambda_min = c / (fc * (1.0 + probe.bandwidth / 200.0));
-                ((width / lambda_min).ceil() as usize).clamp(1, 64)
-            }
-        };
-        let seg = width / m as f64;
-        let n_el = probe.n_elements;
-        let e_pad = n_el.div_ceil(L) * L;
-        let geom = ArrayGeom {
-            n_el,
-            e_pad,
-            m,
-            xe: (0..e_pad).map(|e| if e < n_el { probe.element_x(e) } else { 0.0 }).collect(),
-            xi: (0..m).map(|i| -width / 2.0 + seg / 2.0 + i as f64 * seg).collect(),
-            width,
-            r_min: c / fc / 2.0,
-            kc_half_seg: 2.0 * std::f64::consts::PI * fc / c * seg / 2.0,
-            half_seg_over_c: 2.0 * std::f64::consts::PI / c * seg / 2.0,
-            baffle: probe.baffle,
-            ffd: options.full_frequency_directivity,
-            inv_c: 1.0 / c,
-            beta: medium.attenuation / 8.69 * 1e-6 * 1e2,
-        };
+        let geom = ArrayGeom::new(&probe, &medium, options.element_splitting, options.full_frequency_directivity);
         let pulse = PulseModel::new(fc, probe.tx_now, probe.bandwidth);
         let plan_inputs = PlanInputs {
             fc,

@@ -9,7 +9,7 @@ import numpy as np
 from . import _native
 from ._param import Options, Param, canonical, dumps, number, probe_json
 
-__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat"]
+__all__ = ["getparam", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler", "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat", "pfield"]
 
 
 def _array(a, name, dtype, *, ndim=None, allow_nan=False):
@@ -608,3 +608,42 @@ def genscat(roidim, meandist, I=None, g=None, *, seed=0, inclusions=None, z0=0.0
     x, z, rc = _native.genscat(width, height, float(z0), md, int(seed), dumps(incl), image,
                                40.0 if g is None else float(g))
     return x, np.zeros_like(x), z, rc
+
+
+def pfield(x, y, z, delaysTX, param, isQuick=False, options=None):
+    """RMS pressure field of one transmit (MUST ``pfield``): ``RP, SPECT, IDX = pfield(x, y, z,
+    delaysTX, param[, isQuick][, options])``. ``x``, ``z`` any shape (RP has it), ``y`` ``None``,
+    empty or zeros (the 2-D field), ``delaysTX`` one row of ``txdelay`` (s, NaN: element off),
+    ``param`` with ``TXapodization``, ``attenuation``, ``baffle``… as in ``simus``; ``options``:
+    ``dBThresh`` (−60), ``FrequencyStep``, ``FullFrequencyDirectivity``, ``ElementSplitting``;
+    ``isQuick=True`` sets MUST's quick options (−20 dB, one sub-element, step 1.5). IDX: the
+    frequencies of MUST's grid (0 … 2 fc) in the band.
+
+    Differences: ``SPECT`` is ``None`` (the per-frequency field is not returned); phasors are
+    stepped in float64 (PyMUST: complex64), so the fields agree to PyMUST's own float32 error
+    (nRMS ~1e-6); 2-D only (a non-zero ``y`` — elevation — is refused); linear arrays only."""
+    if isinstance(isQuick, dict) or hasattr(isQuick, "keys"):
+        isQuick, options = False, isQuick
+    xa = _array(x, "x", np.float64)
+    za = _array(z, "z", np.float64)
+    if xa.shape != za.shape:
+        raise ValueError(f"x, z: must have the same shape, got {xa.shape}, {za.shape}")
+    if y is not None and np.size(y) and np.any(np.abs(_array(y, "y", np.float64)) >= 1e-9):
+        raise ValueError("y: elevation (a non-zero y) is not supported: sonoflow's pfield is 2-D (give y=None)")
+    p = canonical(param)
+    d_in = _array(delaysTX, "delaysTX", np.float64, allow_nan=True)
+    if d_in.ndim == 2 and d_in.shape[0] != 1:
+        raise ValueError(f"delaysTX: one transmit (one row), got shape {d_in.shape}")
+    if "Nelements" not in p:
+        p["Nelements"] = d_in.size  # PyMUST: from the delays
+    n = number(p, "Nelements", required=True, lo=1, integer=True)
+    d = _delays(d_in, n)
+    if np.any(d_in[np.isfinite(d_in)] < 0):
+        raise ValueError("delaysTX: must be ≥ 0 s (NaN: element off)")
+    pj = probe_json(p, delays=d)
+    o = _options_json(options)
+    if isQuick:
+        o.update(db_thresh=-20.0, element_splitting=1, full_frequency_directivity=False, frequency_step=1.5)
+    o.setdefault("db_thresh", -60.0)
+    rp, idx, _df = _native.pfield(xa.reshape(-1), za.reshape(-1), dumps(pj), dumps(o))
+    return rp.reshape(xa.shape), None, idx

@@ -1,0 +1,89 @@
+"""sonoflow.pfield against PyMUST 0.1.9's pfield (issue 22: nRMS ≤ 1e-4) on two probes, for plane
+(straight and steered), focused and diverging transmits, with apodisation, attenuation, a rigid
+baffle, full-frequency directivity, MUST's quick options; the frequency band (IDX) equal; bad
+inputs."""
+import copy
+
+import numpy as np
+import pymust
+import pytest
+
+import sonoflow as sf
+
+
+def nrms(a, b):
+    return np.linalg.norm(a - b) / np.linalg.norm(b)
+
+
+def pair(x, z, d, p, *extra):
+    RP, _, IDX = pymust.pfield(x, None, z, d, copy.deepcopy(p), *copy.deepcopy(extra))
+    rp, spect, idx = sf.pfield(x, None, z, d, p, *extra)
+    assert spect is None and rp.shape == x.shape
+    assert np.array_equal(np.asarray(IDX).ravel(), idx), "frequency band"
+    return rp, RP
+
+
+@pytest.mark.parametrize("probe", ["L11-5v", "P4-2v"])
+@pytest.mark.parametrize("tx", ["plane", "steered", "focused", "diverging"])
+def test_transmits_match_pymust(probe, tx):
+    p = pymust.getparam(probe)
+    x, z = np.meshgrid(np.linspace(-1.5e-2, 1.5e-2, 41), np.linspace(-1e-3, 4e-2, 33))
+    d = {"plane": lambda: pymust.txdelay(p, 0),
+         "steered": lambda: pymust.txdelay(p, np.deg2rad(-12)),
+         "focused": lambda: pymust.txdelay(-0.004, 0.025, p),
+         "diverging": lambda: pymust.txdelay(0.002, -0.015, p)}[tx]()
+    rp, RP = pair(x, z, d, p)
+    assert nrms(rp, RP) < 1e-4
+    assert np.all(rp[z < 0] == 0) and np.all(RP[z < 0] == 0)
+
+
+def test_focus_is_where_the_field_peaks():
+    # an independent check: a focused transmit's RMS pressure peaks near its focus
+    p = pymust.getparam("L11-5v")
+    x, z = np.meshgrid(np.linspace(-5e-3, 5e-3, 41), np.linspace(5e-3, 35e-3, 61))
+    rp, _, _ = sf.pfield(x, None, z, pymust.txdelay(0.002, 0.02, p), p)
+    iz, ix = np.unravel_index(np.argmax(rp), rp.shape)
+    assert abs(x[iz, ix] - 0.002) < 0.5e-3 and abs(z[iz, ix] - 0.02) < 5e-3, (x[iz, ix], z[iz, ix])
+
+
+@pytest.mark.parametrize("variant", ["apodization", "attenuation", "rigid", "ffd", "quick", "splitting", "off"])
+def test_parameters_match_pymust(variant):
+    p = pymust.getparam("P4-2v")
+    x, z = np.meshgrid(np.linspace(-2e-2, 2e-2, 31), np.linspace(5e-3, 6e-2, 27))
+    d = pymust.txdelay(p, np.deg2rad(8))
+    extra = ()
+    if variant == "apodization":
+        p.TXapodization = np.hanning(p.Nelements).astype(np.float32)
+    elif variant == "attenuation":
+        p.attenuation = 0.7
+    elif variant == "rigid":
+        p.baffle = "rigid"
+    elif variant == "ffd":
+        extra = (pymust.utils.Options(FullFrequencyDirectivity=True),)
+    elif variant == "quick":
+        extra = (True,)
+    elif variant == "splitting":
+        extra = (pymust.utils.Options(ElementSplitting=3),)
+    elif variant == "off":
+        d = d.astype(float).copy()
+        d[0, 10:20] = np.nan
+    rp, RP = pair(x, z, d, p, *extra)
+    assert nrms(rp, RP) < 1e-4, variant
+
+
+@pytest.mark.parametrize("args,exc,needle", [
+    (lambda p, x, z, d: (x, np.ones_like(x) * 1e-3, z, d, p), ValueError, "elevation"),
+    (lambda p, x, z, d: (x, None, z[:2], d, p), ValueError, "same shape"),
+    (lambda p, x, z, d: (x, None, z, d[:, :10], p), ValueError, "delaysTX"),
+    (lambda p, x, z, d: (x, None, z, -np.abs(d) - 1e-6, p), ValueError, "≥ 0"),
+    (lambda p, x, z, d: (x * np.nan, None, z, d, p), ValueError, "x"),
+    (lambda p, x, z, d: (x, None, z, d, {**dict(p), "radius": 0.05}), ValueError, "convex"),
+    (lambda p, x, z, d: (x, None, z, d, p, {"dBThresh": 3}), ValueError, "dB"),
+])
+def test_bad_inputs(args, exc, needle):
+    p = pymust.getparam("L11-5v")
+    x, z = np.meshgrid(np.linspace(-1e-2, 1e-2, 5), np.linspace(1e-2, 2e-2, 4))
+    d = pymust.txdelay(p, 0)
+    with pytest.raises(exc) as e:
+        sf.pfield(*args(p, x, z, d))
+    assert needle in str(e.value), str(e.value)

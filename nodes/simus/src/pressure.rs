@@ -1,0 +1,366 @@
+//! MUST's PFIELD: the RMS acoustic pressure field of one transmit of a linear array over a set
+//! of points in the x–z plane (2-D, the model SIMUS uses for its transmit path).
+//!
+//! For points p, elements e (split into M sub-elements m, [`crate::pfield`] geometry: clamped
+//! distance r, obliquity, directivity, 1/√r, attenuation) and frequencies f_k of MUST's grid,
+//!
+//! `P_k(p) = i·P(ω_k)·H(ω_k) · Σ_e apod_e e^{iω_k τ_e} · (1/M) Σ_m a_pem e^{(−β + 2πi/c) f_k r_pem}`,
+//!
+//! `RP(p) = sqrt(df·W · Σ_k |P_k(p)|²)` (W = element width), 0 at z < 0. MUST's frequency grid
+//! for PFIELD alone: `df = FrequencyStep / (max r/c + max τ)`, `Nf = 2⌈fc/df⌉ + 1` samples on
+//! [0, 2fc] (df then `2fc/(Nf − 1)`), kept where `|P H|` is above `dBThresh` (−60 dB) of its
+//! maximum. The points are rounded to f32 as PyMUST does; the phasors are stepped across the band
+//! in f64 from an exact start (PyMUST steps them in complex64) and the sums are f64; PyMUST's
+//! result is within its own float32 error of this one (tests against PyMUST 0.1.9:
+//! `nodes/python/tests/test_pfield.py`). Elevation (`height`, `focus`), convex arrays and chirps
+//! are not modelled, as in SIMUS.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{invalid, Result, SimusError};
+use crate::math::sinc_eps;
+use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
+use crate::pulse::PulseModel;
+use crate::{Medium, Probe, Transmit};
+
+/// One point's index and its geometry buffers (r, amplitude, directivity factor).
+type PointBufs<'a> = (usize, (&'a mut [f64], (&'a mut [f64], &'a mut [f64])));
+
+/// Most points one call may take.
+pub const MAX_POINTS: usize = 100_000_000;
+
+/// MUST's PFIELD `options`.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PfieldOptions {
+    /// Band kept: where |P H| is above this (dB, < 0) of its maximum. MUST's default −60.
+    #[serde(alias = "dBThresh")]
+    pub db_thresh: f64,
+    /// Multiplies MUST's frequency step (> 0; MUST's default 1).
+    #[serde(alias = "FrequencyStep")]
+    pub frequency_step: f64,
+    /// Directivity at every frequency (MUST's default: at fc only).
+    #[serde(alias = "FullFrequencyDirectivity")]
+    pub full_frequency_directivity: bool,
+    /// Sub-elements per element (default: MUST's `ceil(W/λmin)`), in [1, 64].
+    #[serde(alias = "ElementSplitting")]
+    pub element_splitting: Option<u32>,
+}
+
+impl Default for PfieldOptions {
+    fn default() -> Self {
+        Self { db_thresh: -60.0, frequency_step: 1.0, full_frequency_directivity: false, element_splitting: None }
+    }
+}
+
+impl PfieldOptions {
+    /// Checks every field; errors name it and its allowed range.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.db_thresh.is_finite() && self.db_thresh < 0.0) {
+            return Err(invalid("options.dBThresh", self.db_thresh, "finite and < 0 (dB)"));
+        }
+        if !(self.frequency_step.is_finite() && self.frequency_step > 0.0 && self.frequency_step <= 100.0) {
+            return Err(invalid("options.FrequencyStep", self.frequency_step, "in (0, 100]"));
+        }
+        if let Some(m) = self.element_splitting {
+            if !(1..=64).contains(&m) {
+                return Err(invalid("options.ElementSplitting", m, "in [1, 64]"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A computed pressure field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PressureField {
+    /// RMS pressure per point (MUST's `RP`), in the points' order.
+    pub rms: Vec<f64>,
+    /// Frequency step (Hz) and the band's first and last frequency (Hz).
+    pub df: f64,
+    pub band_hz: (f64, f64),
+    /// Frequencies in the band.
+    pub n_freq: usize,
+    /// MUST's `IDX`: for each of the Nf grid frequencies on [0, 2fc], whether it is in the band.
+    pub idx: Vec<bool>,
+}
+
+/// PFIELD of `transmit` (delays s, NaN = element off; apodisation) from `probe` in `medium`
+/// at the points (`x`, `z`) (m; z < 0 is behind the array: 0 there).
+pub fn pfield(
+    probe: &Probe,
+    medium: &Medium,
+    transmit: &Transmit,
+    x: &[f64],
+    z: &[f64],
+    options: &PfieldOptions,
+) -> Result<PressureField> {
+    probe.validate()?;
+    medium.validate()?;
+    options.validate()?;
+    transmit.validate(probe.n_elements)?;
+    if let Some(radius) = probe.radius.filter(|r| r.is_finite()) {
+        return Err(SimusError::ConvexNotSupported { name: "param".into(), radius });
+    }
+    if x.len() != z.len() {
+        return Err(SimusError::LengthMismatch { field: "pfield.z", got: z.len(), expected: x.len() });
+    }
+    if x.len() > MAX_POINTS {
+        return Err(invalid("pfield.x", x.len(), "at most 1e8 points"));
+    }
+    if let Some(i) =
+        (0..x.len()).find(|&i| !(x[i].is_finite() && z[i].is_finite() && x[i].abs() <= 100.0 && z[i].abs() <= 100.0))
+    {
+        return Err(invalid("pfield.x/z", format!("({}, {}) at point {i}", x[i], z[i]), "finite, |x|, |z| ≤ 100 m"));
+    }
+    if let Some(d) = transmit.delays.iter().find(|d| **d < 0.0) {
+        return Err(invalid("pfield.delaysTX", d, "≥ 0 s (NaN: element off)"));
+    }
+    let geom = ArrayGeom::new(probe, medium, options.element_splitting, options.full_frequency_directivity);
+    let (fc, c) = (probe.fc, medium.c);
+    // geometry per point: r, amplitude (and |(2π/c)(W/M)/2 sin θ| with ffd), [e_pad·M]
+    let per = geom.e_pad * geom.m;
+    let n = x.len();
+    let mut r = vec![0.0f64; n * per];
+    let mut amp = vec![0.0f64; n * per];
+    let mut dirb = vec![0.0f64; if geom.ffd { n * per } else { 0 }];
+    {
+        let work = |(p, (r, (amp, dirb))): PointBufs<'_>| {
+            let mut blk = BlockGeom::default();
+            blk.resize(1, &geom);
+            let out = ScattererGeom {
+                r: &mut blk.r,
+                amp: &mut blk.amp,
+                dirb: &mut blk.dirb,
+                e_re: &mut blk.e_re,
+                e_im: &mut blk.e_im,
+            };
+            geom.scatterer(x[p] as f32, z[p] as f32, 1.0, false, out);
+            r.copy_from_slice(&blk.r);
+            // not insonified behind the array (MUST: isOUT)
+            let on = if z[p] < 0.0 { 0.0 } else { 1.0 };
+            amp.iter_mut().zip(&blk.amp).for_each(|(a, b)| *a = on * b);
+            if geom.ffd {
+                dirb.copy_from_slice(&blk.dirb);
+            }
+        };
+        let dirb_chunks: Vec<&mut [f64]> =
+            if geom.ffd { dirb.chunks_mut(per).collect() } else { (0..n).map(|_| &mut [][..]).collect() };
+        r.par_chunks_mut(per).zip(amp.par_chunks_mut(per).zip(dirb_chunks.into_par_iter())).enumerate().for_each(work);
+    }
+    // MUST's frequency grid and band
+    let mut r_max = 0.0f64;
+    for rp in r.chunks_exact(per) {
+        for e in 0..geom.n_el {
+            for m in 0..geom.m {
+                r_max = r_max.max(rp[layout(e, m, geom.m)]);
+            }
+        }
+    }
+    let tau_max = transmit.delays.iter().filter(|d| !d.is_nan()).copied().fold(0.0, f64::max);
+    let df0 = options.frequency_step / (r_max / c + tau_max);
+    if !(df0.is_finite() && df0 > 0.0) {
+        return Err(invalid("pfield.x/z", "no point at a distance from the array", "at least one point"));
+    }
+    let nf = 2 * (fc / df0).ceil() as usize + 1;
+    if nf > 2_000_001 {
+        return Err(invalid(
+            "pfield.x/z",
+            format!("{nf} frequencies (points {r_max:.3} m away)"),
+            "a grid needing at most 2e6 frequencies",
+        ));
+    }
+    let df = 2.0 * fc / (nf - 1) as f64;
+    let pulse = PulseModel::new(fc, probe.tx_now, probe.bandwidth);
+    let w = |k: usize| 2.0 * std::f64::consts::PI * k as f64 * df;
+    let s: Vec<f64> = (0..nf).map(|k| (pulse.pulse_im(w(k)) * pulse.probe(w(k))).abs()).collect();
+    let peak = s.iter().copied().fold(0.0, f64::max);
+    let keep = |v: f64| 20.0 * (1e-200 + v / peak).log10() > options.db_thresh;
+    let first = s.iter().position(|v| keep(*v)).unwrap_or(0);
+    let last = s.iter().rposition(|v| keep(*v)).unwrap_or(0);
+    let idx: Vec<bool> = (0..nf).map(|k| (first..=last).contains(&k)).collect();
+    let bins: Vec<(f64, f64)> =
+        (first..=last).map(|k| (k as f64 * df, pulse.pulse_im(w(k)) * pulse.probe(w(k)))).collect();
+    // transmit table D_e(f) = apod_e e^{2πi f τ_e}
+    let ne = geom.n_el;
+    let mut d = vec![(0.0f64, 0.0f64); bins.len() * ne];
+    for (kb, (f, _)) in bins.iter().enumerate() {
+        for e in 0..ne {
+            let wgt = transmit.weight(e);
+            let tau = if transmit.delays[e].is_nan() { 0.0 } else { transmit.delays[e] };
+            let (sn, cs) = crate::math::sincos_turns(f * tau);
+            d[kb * ne + e] = (wgt * cs, wgt * sn);
+        }
+    }
+    let cor = df * geom.width;
+    let rms: Vec<f64> = (0..n)
+        .into_par_iter()
+        .map(|p| {
+            let (rp, ap) = (&r[p * per..(p + 1) * per], &amp[p * per..(p + 1) * per]);
+            if ap.iter().all(|a| *a == 0.0) {
+                return 0.0;
+            }
+            let db = if geom.ffd { &dirb[p * per..(p + 1) * per] } else { &[][..] };
+            // phasor of every (e, m) at the first bin and its step per bin, in f64
+            let f0 = bins[0].0;
+            let mut ph: Vec<(f64, f64)> = (0..per).map(|i| geom.phasor(ap[i], rp[i], f0)).collect();
+            let step: Vec<(f64, f64)> = (0..per).map(|i| geom.phasor(1.0, rp[i], df)).collect();
+            let mut sum = 0.0;
+            for (kb, (f, spec)) in bins.iter().enumerate() {
+                if kb > 0 {
+                    for (z, s) in ph.iter_mut().zip(&step) {
+                        *z = (z.0 * s.0 - z.1 * s.1, z.0 * s.1 + z.1 * s.0);
+                    }
+                }
+                let (mut tr, mut ti) = (0.0, 0.0);
+                for e in 0..ne {
+                    let (mut er, mut ei) = (0.0, 0.0);
+                    for m in 0..geom.m {
+                        let i = layout(e, m, geom.m);
+                        let dir = if geom.ffd { sinc_eps(db[i] * f) } else { 1.0 };
+                        er += ph[i].0 * dir;
+                        ei += ph[i].1 * dir;
+                    }
+                    let (dr, di) = d[kb * ne + e];
+                    tr += dr * er - di * ei;
+                    ti += dr * ei + di * er;
+                }
+                sum += spec * spec * (tr * tr + ti * ti);
+            }
+            (sum * cor).sqrt()
+        })
+        .collect();
+    Ok(PressureField { rms, df, band_hz: (bins[0].0, bins[bins.len() - 1].0), n_freq: bins.len(), idx })
+}
+
+/// Index of (element e, sub-element m) in a point's geometry (`[chunk][m][lane]`).
+fn layout(e: usize, m: usize, n_m: usize) -> usize {
+    use crate::lanes::L;
+    ((e / L) * n_m + m) * L + e % L
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn probe8() -> Probe {
+        let mut p = Probe::paper_5mhz();
+        p.n_elements = 8;
+        p
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    /// PFIELD written out independently: every phasor evaluated at every frequency, the sums in
+    /// the formula's order (the points rounded to f32 as in the library and PyMUST).
+    fn direct(
+        probe: &Probe,
+        medium: &Medium,
+        tx: &Transmit,
+        x: f64,
+        z: f64,
+        m: usize,
+        df: f64,
+        band: (f64, f64),
+    ) -> f64 {
+        let (fc, c) = (probe.fc, medium.c);
+        let (x, z) = (f64::from(x as f32), f64::from(z as f32));
+        let w = probe.element_width();
+        let seg = w / m as f64;
+        let pulse = PulseModel::new(fc, probe.tx_now, probe.bandwidth);
+        let mut sum = 0.0;
+        let mut f = band.0;
+        while f <= band.1 * (1.0 + 1e-12) {
+            let k = 2.0 * PI * f / c;
+            let (mut tr, mut ti) = (0.0, 0.0);
+            for e in 0..probe.n_elements {
+                let (mut er, mut ei) = (0.0, 0.0);
+                for j in 0..m {
+                    let xs = probe.element_x(e) - w / 2.0 + seg / 2.0 + j as f64 * seg;
+                    let dx = x - xs;
+                    let d = dx.hypot(z);
+                    let r = d.max(c / fc / 2.0);
+                    let eps = f64::from(f32::EPSILON);
+                    let sin_t = ((dx + eps) / (d + eps)).clamp(-1.0, 1.0);
+                    let obli = (1.0 - sin_t * sin_t).sqrt();
+                    let arg = 2.0 * PI * fc / c * seg / 2.0 * sin_t;
+                    let dir = if arg == 0.0 { 1.0 } else { arg.sin() / arg };
+                    let a = obli * dir / r.sqrt() / m as f64;
+                    er += a * (k * r).cos();
+                    ei += a * (k * r).sin();
+                }
+                let g = tx.weight(e);
+                let tau = if tx.delays[e].is_nan() { 0.0 } else { tx.delays[e] };
+                let (dr, di) = (g * (2.0 * PI * f * tau).cos(), g * (2.0 * PI * f * tau).sin());
+                tr += dr * er - di * ei;
+                ti += dr * ei + di * er;
+            }
+            let s = pulse.pulse_im(2.0 * PI * f) * pulse.probe(2.0 * PI * f);
+            sum += s * s * (tr * tr + ti * ti);
+            f += df;
+        }
+        (sum * df * w).sqrt()
+    }
+
+    #[test]
+    fn pfield_equals_an_independent_direct_evaluation() {
+        let (probe, medium) = (probe8(), Medium::default());
+        let tx = Transmit::focused(&probe, medium.c, 0.5e-3, 8e-3).unwrap();
+        let xs = [-3e-3, 0.0, 0.7e-3, 2.2e-3, 4e-3];
+        let zs = [2e-3, 5e-3, 8e-3, 11e-3, 0.1e-3];
+        let opts = PfieldOptions { element_splitting: Some(2), ..Default::default() };
+        let f = pfield(&probe, &medium, &tx, &xs, &zs, &opts).unwrap();
+        assert_eq!(f.idx.iter().filter(|b| **b).count(), f.n_freq);
+        for i in 0..xs.len() {
+            let want = direct(&probe, &medium, &tx, xs[i], zs[i], 2, f.df, f.band_hz);
+            assert!((f.rms[i] / want - 1.0).abs() < 1e-9, "point {i}: {} vs {want}", f.rms[i]);
+        }
+    }
+
+    #[test]
+    fn symmetry_off_elements_and_the_half_space_behind() {
+        let (probe, medium) = (probe8(), Medium::default());
+        let tx = Transmit::plane_wave(&probe, medium.c, 0.0).unwrap();
+        // a 0° plane wave of a symmetric array: mirror points in x have the same field
+        let (xs, zs) = ([-2.5e-3, 2.5e-3, -0.9e-3, 0.9e-3, 1e-3], [6e-3, 6e-3, 3e-3, 3e-3, -1e-3]);
+        let f = pfield(&probe, &medium, &tx, &xs, &zs, &PfieldOptions::default()).unwrap();
+        // (to MUST's ε = 2^−23 m offset in sin θ = (dx + ε)/(d + ε), which is not symmetric in dx)
+        let (r1, r2) = (f.rms[0] / f.rms[1] - 1.0, f.rms[2] / f.rms[3] - 1.0);
+        assert!(r1.abs() < 1e-4 && r2.abs() < 1e-4, "{r1:e} {r2:e}");
+        assert_eq!(f.rms[4], 0.0, "behind the array");
+        assert!(f.rms[0] > 0.0);
+        // an element off (NaN delay) is the same as apodisation 0
+        let mut off = tx.clone();
+        off.delays[3] = f64::NAN;
+        let mut apod = tx.clone();
+        apod.apodization = (0..8).map(|e| if e == 3 { 0.0 } else { 1.0 }).collect();
+        let (a, b) = (
+            pfield(&probe, &medium, &off, &xs, &zs, &PfieldOptions::default()).unwrap(),
+            pfield(&probe, &medium, &apod, &xs, &zs, &PfieldOptions::default()).unwrap(),
+        );
+        assert_eq!(a.rms, b.rms);
+        assert!((a.rms[2] / f.rms[2] - 1.0).abs() > 1e-3, "the element off changes the field");
+    }
+
+    #[test]
+    fn bad_inputs_name_the_field() {
+        let (probe, medium) = (probe8(), Medium::default());
+        let tx = Transmit::plane_wave(&probe, medium.c, 0.0).unwrap();
+        let o = PfieldOptions::default();
+        let err = |r: Result<PressureField>| r.unwrap_err().to_string();
+        assert!(err(pfield(&probe, &medium, &tx, &[0.0, 1.0], &[0.01], &o)).contains("pfield.z"));
+        assert!(err(pfield(&probe, &medium, &tx, &[f64::NAN], &[0.01], &o)).contains("pfield.x/z"));
+        let mut neg = tx.clone();
+        neg.delays[0] = -1e-6;
+        let e = err(pfield(&probe, &medium, &neg, &[0.0], &[0.01], &o));
+        assert!(e.contains("delays"), "{e}");
+        let bad = PfieldOptions { db_thresh: 0.0, ..Default::default() };
+        assert!(err(pfield(&probe, &medium, &tx, &[0.0], &[0.01], &bad)).contains("options.dBThresh"));
+        let bad = PfieldOptions { element_splitting: Some(0), ..Default::default() };
+        assert!(err(pfield(&probe, &medium, &tx, &[0.0], &[0.01], &bad)).contains("options.ElementSplitting"));
+        let mut convex = probe.clone();
+        convex.radius = Some(0.04);
+        assert!(err(pfield(&convex, &medium, &tx, &[0.0], &[0.01], &o)).contains("convex"));
+    }
+}
