@@ -517,7 +517,14 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         figs.sort();
         assert_eq!(
             figs,
-            ["bmode.png", "doppler_maps.png", "error_histograms.png", "stage_times.png", "vector_field.png"]
+            [
+                "bmode.png",
+                "doppler_maps.png",
+                "error_histograms.png",
+                "stage_times.png",
+                "transmit_fields.png",
+                "vector_field.png"
+            ]
         );
         let ev_figs: Vec<&str> = ev.figures.iter().map(|f| f.path.as_str()).collect();
         assert_eq!(
@@ -534,6 +541,11 @@ fn quickstart_chain_measures_the_vessel_velocity() {
         let bm = ev.figures.iter().find(|f| f.path.ends_with("bmode.png")).unwrap();
         assert!(bm.title.starts_with("B-mode, packet 0"), "{}", bm.title);
         assert!(bm.caption.contains("40 dB") && bm.caption.contains("true vessel wall"), "{}", bm.caption);
+        // the simus node's transmit field (one tilt in the quickstart), listed by the launcher
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap()).unwrap();
+        let tf = report["figures"].as_array().unwrap().iter().find(|f| f["path"] == "figures/transmit_fields.png");
+        assert!(tf.is_some_and(|f| f["title"].as_str().unwrap().contains("128 elements")), "{tf:?}");
         assert!(ev.warnings.is_empty(), "{:?}", ev.warnings);
         // The histograms have a row of panels (270 px) per field.
         let hist = ev.figures.iter().find(|f| f.path.ends_with("error_histograms.png")).unwrap();

@@ -195,6 +195,7 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
             "error_histograms-subband-divfree.png",
             "error_histograms.png",
             "stage_times.png",
+            "transmit_fields.png",
             "vector_field-subband-divfree.png",
             "vector_field.png"
         ]

@@ -3,7 +3,9 @@
 //! its per-packet frequency plan (`FramePlanner`) come from the library; this file wires the
 //! topics and fills the RF headers (element width included, for the beamformer's I/Q headers).
 //!
-//! Compute time per message is process CPU time (SIMUS runs on a rayon pool).
+//! Compute time per message is process CPU time (SIMUS runs on a rayon pool). At the end, unless
+//! `field_figure = false`, the transmit pressure fields over the region the scatterers occupied
+//! go into the run report (`figures/transmit_fields.png`, listed in `figures-<node>.json`).
 
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
@@ -39,12 +41,14 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     let mut out = kit.output::<RfFrame>("rf")?;
     kit.handshake(&mut [&mut input, &mut out])?;
     let n_el = scan.probe.n_elements;
+    let (out_dir, node) = (kit.cfg.out_dir.clone(), kit.cfg.node_name.clone());
     let (mut scene, mut statics) = (Scene::default(), StaticEchoes::default());
     let mut noise: Option<NoiseModel> = None;
     transform(kit, &mut input, &mut out, |kit, out, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
         scene.fill(sample.payload());
+        scene.extend_region();
         let all = sonoflow_simus::ScattererSlices { x: &scene.x, z: &scene.z, rc: &scene.rc };
         let choice = planner.plan(&simus, all, h.frame_in_packet == 0)?;
         let m = scene.n_moving;
@@ -79,7 +83,52 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
             kit.published((n * 4) as u64, rh.common.frame_id, h.common.t_valid, compute)?;
         }
         Ok(())
-    })
+    })?;
+    if let (true, Some(dir), Some(region)) = (p.field_figure, out_dir, scene.region) {
+        if let Err(e) = field_figure(&scan, &p, region, std::path::Path::new(&dir), &node) {
+            eprintln!("simus: warning: transmit field figure: {e:#}");
+        }
+    }
+    Ok(())
+}
+
+/// The transmit fields over the scatterers' region (10 % margins, from at least λ deep, at least
+/// 0.65 aperture either side) into
+/// `dir/figures/transmit_fields.png`, listed in `dir/figures-<node>.json` for the report.
+fn field_figure(scan: &Scan, p: &ScanParams, r: [f32; 4], dir: &std::path::Path, node: &str) -> anyhow::Result<()> {
+    use sonoflow_evaluate::figures;
+    let [x0, x1, z0, z1] = r.map(f64::from);
+    let (mx, mz) = (0.1 * (x1 - x0).max(1e-3), 0.1 * (z1 - z0).max(1e-3));
+    let lambda = p.medium.c / scan.probe.fc;
+    // laterally at least 0.65 aperture either side, so that the edges of each wave show
+    let half = 0.65 * scan.probe.n_elements as f64 * scan.probe.pitch;
+    let region = [(x0 - mx).min(-half), (x1 + mx).max(half), (z0 - mz).max(lambda), (z1 + mz).max(lambda + 2e-3)];
+    let fields = scan.transmit_fields(&p.medium, region, 96)?;
+    let max = fields.iter().flat_map(|f| f.rms.iter().copied()).fold(0.0, f64::max);
+    let db: Vec<Vec<f32>> =
+        fields.iter().map(|f| f.rms.iter().map(|v| (20.0 * (v / max).log10()).max(-200.0) as f32).collect()).collect();
+    let panels: Vec<figures::FieldPanel> = fields
+        .iter()
+        .zip(&db)
+        .map(|(f, db)| figures::FieldPanel {
+            title: format!("tx {:+.1}°", f.tilt.to_degrees()).replace('-', "−"),
+            grid: sonoflow_messages::GridV1 {
+                x0: f.x0,
+                z0: f.z0,
+                dx: f.dx,
+                dz: f.dz,
+                nx: f.nx as u32,
+                nz: f.nz as u32,
+            },
+            db,
+        })
+        .collect();
+    let heading =
+        format!("Transmit pressure fields — {} elements, {:.1} MHz", scan.probe.n_elements, scan.probe.fc / 1e6);
+    let fig = figures::transmit_fields(dir, "", &heading, &panels)?;
+    let list = serde_json::to_string_pretty(&[fig])?;
+    sonoflow_fileio::write_atomic(&dir.join(format!("figures-{node}.json")), list.as_bytes())?;
+    Ok(())
 }
 
 /// The header of transmit `tx_id`'s RF frame for the particle snapshot `h`: the frame's sampling
@@ -127,6 +176,8 @@ struct Scene {
     z: Vec<f32>,
     rc: Vec<f32>,
     n_moving: usize,
+    /// [x_min, x_max, z_min, z_max] of every scatterer in front of the array seen so far.
+    region: Option<[f32; 4]>,
 }
 
 impl Scene {
@@ -142,6 +193,17 @@ impl Scene {
             self.rc.push(q.amplitude);
         }
         self.n_moving = particles.iter().filter(|q| q.kind != PARTICLE_TISSUE).count();
+    }
+
+    /// Grows [`Scene::region`] by this snapshot's scatterers (z > 0, finite).
+    fn extend_region(&mut self) {
+        for (x, z) in self.x.iter().zip(&self.z) {
+            if !(x.is_finite() && z.is_finite() && *z > 0.0) {
+                continue;
+            }
+            let r = self.region.get_or_insert([*x, *x, *z, *z]);
+            *r = [r[0].min(*x), r[1].max(*x), r[2].min(*z), r[3].max(*z)];
+        }
     }
 }
 

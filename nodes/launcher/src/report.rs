@@ -70,6 +70,30 @@ pub fn add_figures(dir: &Path, r: &mut RunReport) {
             Err(e) => r.warnings.push(format!("{}: {e}: its figures are not listed", path.display())),
         }
     }
+    // Figures other nodes drew, listed in `figures-<node>.json` (a JSON array of figures).
+    for path in node_figure_lists(dir) {
+        let Ok(text) = std::fs::read_to_string(&path) else { continue };
+        match serde_json::from_str::<Vec<figures::Figure>>(&text) {
+            Ok(f) => r.figures.extend(f.into_iter().filter(|f| dir.join(&f.path).is_file())),
+            Err(e) => r.warnings.push(format!("{}: {e}: its figures are not listed", path.display())),
+        }
+    }
+}
+
+/// `dir/figures-*.json`, sorted by name.
+fn node_figure_lists(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut v: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                    name.starts_with("figures-") && name.ends_with(".json")
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
 }
 
 /// Writes `report.json` and `report.md` into `dir` (atomically).

@@ -80,7 +80,7 @@ pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
 pub use phantom::{genscat, must_meandist, Inclusion, Phantom, PhantomParams};
 pub use pressure::{pfield, PfieldOptions, PressureField};
 pub use probe::{Baffle, Probe, PRESET_NAMES};
-pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams};
+pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams, TransmitField};
 pub use scatterers::{ScattererSlices, Scatterers};
 pub use simus::{zero_small_values, RfFrame, Simus};
 pub use statics::StaticEchoes;

@@ -63,6 +63,9 @@ pub struct ScanParams {
     pub tx_tukey: f64,
     /// Receive noise (`noise = { snr_db = …, seed = … }`, [`crate::noise`]); absent: none.
     pub noise: Option<NoiseParams>,
+    /// Draw the transmit pressure fields (MUST `pfield`, quick options) over the region the
+    /// scatterers occupied into the run report at the end (default true).
+    pub field_figure: bool,
 }
 
 impl Default for ScanParams {
@@ -77,6 +80,7 @@ impl Default for ScanParams {
             plan_margin: 2e-3,
             tx_tukey: 0.0,
             noise: None,
+            field_figure: true,
         }
     }
 }
@@ -218,6 +222,32 @@ mod tests {
     use super::*;
 
     #[test]
+    fn transmit_fields_move_with_the_tilt() {
+        // an independent check of the geometry: a plane wave tilted by θ (> 0 towards +x) moves
+        // the insonified band by z·tan θ between two depths
+        let p = ScanParams { tilts_deg: vec![0.0, 15.0], ..Default::default() };
+        let scan = p.scan(256).unwrap();
+        let f = scan.transmit_fields(&p.medium, [-0.03, 0.03, 0.01, 0.03], 121).unwrap();
+        assert_eq!(f.len(), 2);
+        let (nx, nz) = (f[0].nx, f[0].nz);
+        assert!(nz >= 16 && f.iter().all(|t| t.rms.len() == nx * nz));
+        // power-weighted lateral centre of a row
+        let centre = |t: &TransmitField, iz: usize| {
+            let row = &t.rms[iz * nx..(iz + 1) * nx];
+            let w: f64 = row.iter().map(|v| v * v).sum();
+            row.iter().enumerate().map(|(ix, v)| (t.x0 + ix as f64 * t.dx) * v * v).sum::<f64>() / w
+        };
+        let (top, bottom) = (0, nz - 1);
+        let dz = (bottom - top) as f64 * f[0].dz;
+        // 0°: centred and not moving; 15°: moving by dz·tan 15° = 5.4 mm (within 15 %)
+        assert!(centre(&f[0], top).abs() < 2e-4 && centre(&f[0], bottom).abs() < 2e-4);
+        let shift = centre(&f[1], bottom) - centre(&f[1], top);
+        let want = dz * 15f64.to_radians().tan();
+        assert!((shift / want - 1.0).abs() < 0.15, "shift {shift:.4} m, want {want:.4} m");
+        assert!(scan.transmit_fields(&p.medium, [0.01, 0.0, 0.01, 0.02], 50).is_err());
+    }
+
+    #[test]
     fn tukey_window_is_flat_in_the_middle_and_tapers_to_zero() {
         // r = 1: Hann, 0.5 (1 − cos 2πi/(n−1)); r = 0.5: flat over the middle half.
         let n = 129;
@@ -238,5 +268,60 @@ mod tests {
         assert!(scan(serde_json::json!({ "tx_tukey": 0.5 })).is_ok());
         let e = scan(serde_json::json!({ "tilts_deg": [0.0, 95.0] })).unwrap_err();
         assert!(e.contains("tilts_deg[1]"), "{e}");
+    }
+}
+
+/// One transmit's RMS pressure (MUST `pfield`) on a grid: node (ix, iz) at
+/// (x0 + ix·dx, z0 + iz·dz), row-major `iz·nx + ix`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransmitField {
+    /// Plane-wave tilt (rad).
+    pub tilt: f64,
+    pub x0: f64,
+    pub dx: f64,
+    pub nx: usize,
+    pub z0: f64,
+    pub dz: f64,
+    pub nz: usize,
+    pub rms: Vec<f64>,
+}
+
+impl Scan {
+    /// The RMS pressure field of every transmit over `[x_min, x_max] × [z_min, z_max]` (m) on a
+    /// grid of `nx` columns (rows in proportion, 16–240), with MUST's quick PFIELD options
+    /// (−20 dB band, one sub-element per element, frequency step × 1.5): a picture of where each
+    /// transmit insonifies, not a calibrated field.
+    pub fn transmit_fields(&self, medium: &Medium, region: [f64; 4], nx: usize) -> crate::Result<Vec<TransmitField>> {
+        let [x_min, x_max, z_min, z_max] = region;
+        if !(region.iter().all(|v| v.is_finite()) && x_max > x_min && z_max > z_min && (2..=2000).contains(&nx)) {
+            return Err(crate::error::invalid(
+                "transmit_fields.region",
+                format!("{region:?}, {nx} columns"),
+                "x_max > x_min, z_max > z_min, 2–2000 columns",
+            ));
+        }
+        let dx = (x_max - x_min) / (nx - 1) as f64;
+        let nz = (((z_max - z_min) / dx).round() as usize + 1).clamp(16, 240);
+        let dz = (z_max - z_min) / (nz - 1) as f64;
+        let (mut xs, mut zs) = (Vec::with_capacity(nx * nz), Vec::with_capacity(nx * nz));
+        for iz in 0..nz {
+            for ix in 0..nx {
+                xs.push(x_min + ix as f64 * dx);
+                zs.push(z_min + iz as f64 * dz);
+            }
+        }
+        let quick = crate::PfieldOptions {
+            db_thresh: -20.0,
+            frequency_step: 1.5,
+            full_frequency_directivity: false,
+            element_splitting: Some(1),
+        };
+        self.transmits
+            .iter()
+            .map(|(tilt, tx)| {
+                let f = crate::pfield(&self.probe, medium, tx, &xs, &zs, &quick)?;
+                Ok(TransmitField { tilt: *tilt, x0: x_min, dx, nx, z0: z_min, dz, nz, rms: f.rms })
+            })
+            .collect()
     }
 }

@@ -18,12 +18,14 @@ use std::path::Path;
 
 mod bmode;
 mod doppler_maps;
+mod fields;
 mod histograms;
 mod lines;
 mod stages;
 mod vectors;
 pub use bmode::*;
 pub use doppler_maps::*;
+pub use fields::*;
 pub use histograms::*;
 pub use lines::*;
 pub use stages::*;
@@ -37,6 +39,7 @@ pub const VECTORS: &str = "vector_field.png";
 pub const ERRORS: &str = "error_histograms.png";
 pub const STAGES: &str = "stage_times.png";
 pub const BMODE: &str = "bmode.png";
+pub const FIELDS: &str = "transmit_fields.png";
 
 /// One written figure, as listed in `report.json` / `evaluation.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -564,6 +567,33 @@ mod tests {
         assert!(bmode_figure(dir.path(), "", "B", &short, None).is_err());
         let bad = BmodePanel { title: "t".into(), grid: g, image: &image, dr: f64::NAN };
         assert!(bmode_figure(dir.path(), "", "B", &bad, None).is_err());
+    }
+
+    #[test]
+    fn transmit_fields_draw_each_cell_in_its_level_colour() {
+        let dir = tempfile::tempdir().unwrap();
+        let n = 40;
+        let g = grid(n as u32);
+        // levels −1 dB per column: 0 … −39 dB; a second panel at −50 dB everywhere (below the range)
+        let ramp: Vec<f32> = (0..n * n).map(|i| -((i % n) as f32)).collect();
+        let low = vec![-50.0f32; n * n];
+        let panels = [
+            FieldPanel { title: "tx 0°".into(), grid: g, db: &ramp },
+            FieldPanel { title: "tx 10°".into(), grid: g, db: &low },
+        ];
+        let (fig, maps) = transmit_fields_mapped(dir.path(), "", "fields", &panels).unwrap();
+        assert_eq!(fig.path, "figures/transmit_fields.png");
+        let img = decode(&dir.path().join(&fig.path));
+        assert_eq!((img.0, img.1), (fig.width, fig.height));
+        for (ix, iz) in [(0, 0), (10, 5), (39, 20)] {
+            let (x, z) = cell(&g, ix, iz);
+            assert_eq!(px(&img, maps[0].pixel(x, z)), field_colour(-(ix as f64)), "cell ({ix}, {iz})");
+            assert_eq!(px(&img, maps[1].pixel(x, z)), speed_colour(0.0), "below −40 dB: the darkest colour");
+        }
+        assert_eq!(field_colour(0.0), speed_colour(1.0));
+        let bad = FieldPanel { title: "t".into(), grid: g, db: &ramp[1..] };
+        assert!(transmit_fields(dir.path(), "", "f", &[bad]).is_err());
+        assert!(transmit_fields(dir.path(), "", "f", &[]).is_err());
     }
 
     #[test]
