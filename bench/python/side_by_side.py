@@ -10,7 +10,8 @@ PyMUST's BLAS both limited to one thread; PyMUST computes in float64, sonoflow's
 
 Cases: simus (paper probe, 0° plane wave, N scatterers in a 40 × 40 mm box), das including its
 set-up (PyMUST: dasmtx + the sparse product; 200 × 200 grid, F# 1.5), iq2doppler (200 × 200 × 32
-packet, 5 × 5 window), smoothn (robust, GCV, 128 × 128 × 2 field with 10 % outliers). Each time
+packet, 5 × 5 window), pfield (focused transmit, 60 × 60 grid), smoothn (robust, GCV, 128 × 128 × 2
+field with 10 % outliers). Each time
 is the best of at least `--repeat` runs (default 3) and of as many more as fit in 1 s (at most 200),
 on both sides alike (simus once on the PyMUST side when it takes > 10 s).
 """
@@ -85,6 +86,13 @@ q.PRF = 5e3
 t_pm, (v_pm, _) = best(lambda: pymust.iq2doppler(packet, copy.deepcopy(q), 5), a.repeat)
 t_sf, (v_sf, _) = best(lambda: sf.iq2doppler(packet, q, 5), a.repeat)
 rows.append(("iq2doppler, 200 × 200 × 32, M = 5", t_pm, t_sf, nrms(v_sf, v_pm)))
+
+# pfield of a focused transmit on a 60 × 60 grid (PyMUST's default options)
+fd = pymust.txdelay(0.0, 0.03, p)
+xf, zf = np.meshgrid(np.linspace(-15e-3, 15e-3, 60), np.linspace(5e-3, 50e-3, 60))
+t_pm, (pf_pm, _, _) = best(lambda: pymust.pfield(xf, None, zf, fd, copy.deepcopy(p)), a.repeat)
+t_sf, (pf_sf, _, _) = best(lambda: sf.pfield(xf, None, zf, fd, p), a.repeat)
+rows.append(("pfield, focused, 60 × 60", t_pm, t_sf, nrms(pf_sf, pf_pm)))
 
 yy, xx = np.mgrid[0:128, 0:128]
 u = np.sin(xx / 9) * np.cos(yy / 13) + 0.1 * rng.standard_normal((128, 128))
