@@ -316,6 +316,31 @@ fn a_genscat_phantom_shows_its_cyst_and_inclusion_through_simus_das_and_bmode() 
     }
     let mean = bright_db.iter().sum::<f64>() / 3.0;
     assert!((mean - 10.0).abs() < 1.5, "inclusion contrast over 3 seeds {mean:.2} dB, set to 10");
+
+    // --per-cell: 10 scatterers per resolution cell of the paper probe at F# 2, the cell computed
+    // here independently (axial c/(2·fc·0.75) × lateral λ·2); the count over the region within 2 %
+    let (code, _, err) = run(
+        "genscat",
+        &[
+            "--region",
+            "0.016,0.012",
+            "--param",
+            s(&p("p.json")),
+            "--per-cell",
+            "10",
+            "--fnumber",
+            "2",
+            "--out",
+            s(&p("c.npy")),
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let cell = 1540.0 / (2.0 * 5e6 * 0.75) * (1540.0 / 5e6 * 2.0);
+    let n = npy::read(&p("c.npy")).unwrap().shape[0] as f64;
+    let want = 10.0 * 0.016 * 0.012 / cell;
+    assert!((n / want - 1.0).abs() < 0.02, "{n} scatterers, want {want:.0}");
+    let side: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p("c.json")).unwrap()).unwrap();
+    assert!((side["scatterers_per_cell"].as_f64().unwrap() - 10.0).abs() < 1e-9);
 }
 
 #[test]
@@ -323,7 +348,10 @@ fn genscat_tool_rejects_bad_input_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s.npy");
     let o = s(&out);
-    let cases: [(&[&str], &[&str]); 6] = [
+    let cases: [(&[&str], &[&str]); 9] = [
+        (&["--region", "0.01,0.01", "--per-cell", "5"], &["--per-cell needs --param"]),
+        (&["--region", "0.01,0.01", "--per-cell", "0", "--param", "L11-5v"], &["--per-cell", "(0, 1000]"]),
+        (&["--region", "0.01,0.01", "--per-cell", "5", "--meandist", "1e-4"], &["not both"]),
         (&["--region", "0.01", "--meandist", "1e-4"], &["--region", "WIDTH,HEIGHT"]),
         (&["--region", "0.01,x", "--meandist", "1e-4"], &["--region"]),
         (&["--region", "0.01,0.01"], &["--meandist", "--param"]),

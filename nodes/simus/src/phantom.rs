@@ -78,6 +78,13 @@ pub fn must_meandist(c: f64, fc: f64, bandwidth_pct: f64) -> f64 {
     c / (fc * (1.0 + bandwidth_pct / 200.0))
 }
 
+/// Area (m²) of a 2-D resolution cell of a pulse-echo system: the axial −6 dB extent
+/// `c/(2·fc·bandwidth/100)` times the lateral one `λ·F#` (λ = c/fc, F# the receive f-number) —
+/// the usual approximations, for a density in scatterers per cell.
+pub fn resolution_cell_area(c: f64, fc: f64, bandwidth_pct: f64, fnumber: f64) -> f64 {
+    c / (2.0 * fc * bandwidth_pct / 100.0) * (c / fc * fnumber)
+}
+
 impl PhantomParams {
     /// Scatterers per unit area (m⁻²): one per jittered grid cell, `0.4/meandist²`.
     pub fn density(&self) -> f64 {

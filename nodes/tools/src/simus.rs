@@ -175,6 +175,13 @@ pub struct GenscatArgs {
     /// Mean nearest-neighbour distance (m). Default: MUST's, c/(fc·(1 + bandwidth/200)) of `--param`.
     #[arg(long)]
     pub meandist: Option<f64>,
+    /// Scatterers per resolution cell instead of `--meandist` (needs `--param`; the cell is
+    /// c/(2·fc·bandwidth) axially × λ·F# laterally), in (0, 1000].
+    #[arg(long)]
+    pub per_cell: Option<f64>,
+    /// Receive f-number of the resolution cell (`--per-cell` and the sidecar's count per cell), > 0.
+    #[arg(long, default_value_t = 1.5)]
+    pub fnumber: f64,
     /// Probe preset or MUST-style parameter file, for the default `--meandist`.
     #[arg(long)]
     pub param: Option<String>,
@@ -205,21 +212,43 @@ pub fn run_genscat(a: &GenscatArgs) -> anyhow::Result<i32> {
     let [width, height] = dims[..] else {
         anyhow::bail!("--region {}: expected WIDTH,HEIGHT (m), two numbers", a.region);
     };
-    let (meandist, from) = match (a.meandist, &a.param) {
-        (Some(m), _) => (m, "--meandist".to_string()),
-        (None, Some(param)) => {
+    if !(a.fnumber.is_finite() && a.fnumber > 0.0) {
+        anyhow::bail!("--fnumber {}: must be finite and > 0", a.fnumber);
+    }
+    // the probe and medium of --param, for MUST's default meandist and the resolution cell
+    let probe = match &a.param {
+        Some(param) => {
             let p = Path::new(param);
-            let (probe, c) = if p.exists() {
+            Some(if p.exists() {
                 let parts = parse_file::<MustParam>(p)?.into_parts()?;
                 (parts.probe, parts.medium.c)
             } else {
                 let probe = Probe::preset(param)
                     .map_err(|e| anyhow::anyhow!("--param {param}: not a file, and not a preset: {e}"))?;
                 (probe, sonoflow_simus::Medium::default().c)
-            };
-            (sonoflow_simus::must_meandist(c, probe.fc, probe.bandwidth), format!("MUST's default for --param {param}"))
+            })
         }
-        (None, None) => anyhow::bail!("give --meandist (m) or --param (a probe, for MUST's default meandist)"),
+        None => None,
+    };
+    let cell = probe.as_ref().map(|(p, c)| sonoflow_simus::resolution_cell_area(*c, p.fc, p.bandwidth, a.fnumber));
+    let (meandist, from) = match (a.meandist, a.per_cell, &probe) {
+        (Some(_), Some(_), _) => anyhow::bail!("give --meandist or --per-cell, not both"),
+        (Some(m), None, _) => (m, "--meandist".to_string()),
+        (None, Some(n), _) if !(n.is_finite() && n > 0.0 && n <= 1000.0) => {
+            anyhow::bail!("--per-cell {n}: must be in (0, 1000] scatterers per resolution cell")
+        }
+        (None, Some(n), Some(_)) => (
+            sonoflow_simus::PhantomParams::meandist_for(n, cell.unwrap_or(f64::NAN)),
+            format!("--per-cell {n} (cell {:.4} mm² at F# {})", cell.unwrap_or(f64::NAN) * 1e6, a.fnumber),
+        ),
+        (None, Some(_), None) => anyhow::bail!("--per-cell needs --param (the probe's fc and bandwidth set the cell)"),
+        (None, None, Some((p, c))) => (
+            sonoflow_simus::must_meandist(*c, p.fc, p.bandwidth),
+            format!("MUST's default for --param {}", a.param.as_deref().unwrap_or("")),
+        ),
+        (None, None, None) => {
+            anyhow::bail!("give --meandist (m), --per-cell N, or --param (a probe, for MUST's default meandist)")
+        }
     };
     let mut inclusions = Vec::new();
     for s in &a.inclusions {
@@ -246,6 +275,9 @@ pub fn run_genscat(a: &GenscatArgs) -> anyhow::Result<i32> {
         "meandist": meandist,
         "meandist_from": from,
         "density_per_mm2": params.density() * 1e-6,
+        "resolution_cell_mm2": cell.map(|a| a * 1e6),
+        "fnumber": a.fnumber,
+        "scatterers_per_cell": cell.map(|a| params.scatterers_per_cell(a)),
         "seed": a.seed,
         "inclusions": params.inclusions,
         "layout": "npy float64 shape (n, 3): x, z (m), rc (Rayleigh of mean 1 × inclusion level)",
