@@ -5,7 +5,7 @@
 //! scatterer, a synthetic Doppler packet of known phase rotation, and bad inputs.
 
 mod common;
-use common::bin;
+use common::{arg as s, lcg_noise as noise, run_tool as cli};
 use sonoflow_beamform::testkit::centroid;
 use sonoflow_beamform::{
     to_element_major, to_sample_major, DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32,
@@ -13,31 +13,6 @@ use sonoflow_beamform::{
 use sonoflow_doppler::{flags, ClutterParams, DopplerEstimator, DopplerParams, Estimator, Packet};
 use sonoflow_fileio::npy;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn cli(tool: &str, args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(bin()).arg(tool).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Deterministic uniform numbers in [-1, 1).
-fn noise(seed: u64, n: usize) -> Vec<f64> {
-    let mut state = seed;
-    (0..n)
-        .map(|_| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            2.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 1.0
-        })
-        .collect()
-}
 
 fn c32(c: &sonoflow_beamform::Complex<f64>) -> C32 {
     C32::new(c.re as f32, c.im as f32)

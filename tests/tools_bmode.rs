@@ -7,38 +7,13 @@
 //! inputs (an error naming the flag, no file written).
 
 mod common;
-use common::bin;
+use common::{arg as s, lcg_noise as noise, run_tool as run};
 use sonoflow_beamform::Complex;
 use sonoflow_fileio::npy;
 use std::path::Path;
-use std::process::Command;
 
 fn cli(args: &[&str]) -> (i32, String, String) {
     run("bmode", args)
-}
-
-fn run(tool: &str, args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(bin()).arg(tool).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Deterministic uniform numbers in [-1, 1).
-fn noise(seed: u64, n: usize) -> Vec<f64> {
-    let mut state = seed;
-    (0..n)
-        .map(|_| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            2.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 1.0
-        })
-        .collect()
 }
 
 /// Speckle-like I/Q (nz, nx) whose envelope decays as exp(−iz / decay) with depth, rounded to

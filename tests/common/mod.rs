@@ -187,3 +187,29 @@ pub fn read_topic(path: &Path, topic: &str) -> Vec<Vec<u8>> {
         .map(|m| m.unwrap().data)
         .collect()
 }
+
+/// Runs `sonoflow TOOL ARGS…` (a batch tool) to the end: (exit code, stdout, stderr).
+pub fn run_tool(tool: &str, args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(bin()).arg(tool).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A path as a command-line argument.
+pub fn arg(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Deterministic uniform numbers in [-1, 1) (a 64-bit LCG: test data, not statistics).
+pub fn lcg_noise(seed: u64, n: usize) -> Vec<f64> {
+    let mut state = seed;
+    (0..n)
+        .map(|_| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            2.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+        })
+        .collect()
+}
