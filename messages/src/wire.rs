@@ -246,6 +246,14 @@ pub const CLUTTER_IIR: u32 = 2;
 /// `DopplerMapHeaderV2::clutter_filter`: SVD of the Casorati matrix.
 pub const CLUTTER_SVD: u32 = 3;
 
+/// `DopplerMapHeaderV2::estimator`: lag-L slow-time autocorrelation (paper 1 eq. 19).
+pub const ESTIMATOR_AUTOCORRELATION: u32 = 0;
+/// `DopplerMapHeaderV2::estimator`: Loupas' 2-D autocorrelator.
+pub const ESTIMATOR_LOUPAS: u32 = 1;
+/// `DopplerMapHeaderV2::estimator`: speckle tracking; the map is the axial component of the
+/// tracked field (velocity toward the probe, projection (0, −1)), variance = 1 − correlation.
+pub const ESTIMATOR_SPECKLE_TRACKING: u32 = 2;
+
 wire_struct! {
     /// Header of a colour-Doppler map for one receive angle. Payload: f32 planes,
     /// `data[p·nx·nz + iz·nx + ix]`, plane meaning in `plane_ids`.
@@ -270,7 +278,8 @@ wire_struct! {
         pub packet: u32,
         pub packet_size: u32,
         pub n_planes: u32,
-        /// Which estimator produced the map (free-form id).
+        /// Which estimator produced the map: `ESTIMATOR_AUTOCORRELATION`, `ESTIMATOR_LOUPAS`,
+        /// `ESTIMATOR_SPECKLE_TRACKING`; other values are free for external estimators.
         pub estimator: u32,
         pub plane_ids: [u32; 8],
     }

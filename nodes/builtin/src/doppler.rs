@@ -13,7 +13,8 @@ use sonoflow_messages::types::{DopplerMap as DopplerMapMsg, IqFrame, VectorField
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
     plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV2, APODIZATION_HANN,
-    CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD, VECTOR_RAW,
+    CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD, ESTIMATOR_AUTOCORRELATION, ESTIMATOR_LOUPAS,
+    VECTOR_RAW,
 };
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
@@ -60,7 +61,7 @@ pub fn look_header(h: &IqFrameHeaderV2) -> LookHeader {
 }
 
 /// The wire's `CLUTTER_*` for the library's clutter filter kind.
-fn wire_clutter_kind(kind: u32) -> u32 {
+pub fn wire_clutter_kind(kind: u32) -> u32 {
     match kind {
         clutter_kind::POLYNOMIAL => CLUTTER_POLYNOMIAL,
         clutter_kind::IIR => CLUTTER_IIR,
@@ -108,8 +109,8 @@ pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, 
                 packet_size: l.packet_size as u32,
                 n_planes: 6,
                 estimator: match l.estimator {
-                    Estimator::Autocorrelation => 0,
-                    Estimator::Loupas => 1,
+                    Estimator::Autocorrelation => ESTIMATOR_AUTOCORRELATION,
+                    Estimator::Loupas => ESTIMATOR_LOUPAS,
                 },
                 clutter_filter: wire_clutter_kind(l.clutter.kind),
                 clutter_order: l.clutter.order_or_rank as u32,

@@ -21,6 +21,7 @@ pub mod recorder;
 pub mod regulariser;
 pub mod replay;
 pub mod simus;
+pub mod speckle_tracking;
 pub mod sph_flow;
 pub mod test_source;
 
@@ -31,6 +32,7 @@ static KINDS: &[KindSpec] = &[
     simus::SPEC,
     beamformer::SPEC,
     doppler::SPEC,
+    speckle_tracking::SPEC,
     regulariser::SPEC,
     evaluator::SPEC,
     recorder::SPEC,

@@ -13,6 +13,9 @@
 //! 5. [`PacketAssembler`] ([`packet`]): collects a packet's images per look (transmit tilt,
 //!    receive angle, fc), estimates one map per look and solves the vector velocity with
 //!    fc²-weighted looks and band-normalised power: what the `doppler` node does, without IPC.
+//! 6. [`SpeckleAssembler`] ([`sptrack`]): speckle tracking (MUST `sptrack`), the alternative to
+//!    Doppler: envelope block matching between frames `t` and `t + lag`, multi-pass, sub-pixel,
+//!    the same vector field on the image grid: what the `speckle-tracking` node does.
 //!
 //! Units are SI; x lateral, z depth. Doppler velocities are positive toward the probe. Errors are
 //! `sonoflow_beamform`'s [`BeamformError`] (the field names say which stage).
@@ -24,6 +27,7 @@ pub mod estimator;
 pub mod iir;
 pub mod packet;
 pub mod slowtime;
+pub mod sptrack;
 pub mod svd;
 #[cfg(feature = "testkit")]
 pub mod testkit;
@@ -37,6 +41,7 @@ pub use iir::{IirHighPass, IirInit};
 pub use packet::{mean_power, LookHeader, LookMap, PacketAssembler, PacketParams, PacketProducts, ProjectionMode};
 pub use sonoflow_beamform::error::{BeamformError, Result};
 pub use sonoflow_beamform::{Grid, C32};
+pub use sptrack::{SpeckleAssembler, SpeckleParams, SpeckleProducts, SpeckleTracker, Subpixel, Tracked, TrackedImage};
 pub use svd::{SvdFilter, SvdOutcome, SvdRank};
 pub use vector::{
     nominal_projection, outlier_looks, solve_vector, solve_vector_weighted, Projection, VectorField, VectorInput,

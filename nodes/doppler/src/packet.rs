@@ -234,41 +234,24 @@ impl PacketProducts {
 }
 
 /// One packet's frames of one look.
-struct Stream {
-    header: LookHeader,
-    frames: Vec<Vec<C32>>,
+pub(crate) struct Stream {
+    pub header: LookHeader,
+    pub frames: Vec<Vec<C32>>,
 }
 
-type LookKey = (u64, u64, u64);
-/// (look, grid x0/z0/dx/dz, nx, nz, aperture as text), for the projection cache.
-type ProjectionKey = (LookKey, [u64; 4], usize, usize, String);
+pub(crate) type LookKey = (u64, u64, u64);
 
-/// Collects a packet's images per look and turns each finished packet into [`PacketProducts`].
-pub struct PacketAssembler {
-    params: PacketParams,
+/// Groups I/Q images into packets and, within a packet, into looks (transmit tilt, receive
+/// angle, fc): the bookkeeping shared by [`PacketAssembler`] and the speckle tracker.
+#[derive(Default)]
+pub(crate) struct LookCollector {
     packet: Option<u32>,
     streams: BTreeMap<LookKey, Stream>,
-    map: DopplerMap,
-    vec: VectorField,
-    projections: BTreeMap<ProjectionKey, Vec<[f32; 2]>>,
 }
 
-impl PacketAssembler {
-    /// Validates `params`.
-    pub fn new(params: PacketParams) -> Result<Self> {
-        params.validate()?;
-        Ok(Self {
-            params,
-            packet: None,
-            streams: BTreeMap::new(),
-            map: DopplerMap::default(),
-            vec: VectorField::default(),
-            projections: BTreeMap::new(),
-        })
-    }
-
-    /// Adds one image; returns the finished previous packet if this image starts a new one.
-    pub fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> Result<Option<PacketProducts>> {
+impl LookCollector {
+    /// Adds one image; returns the previous packet's looks if this image starts a new packet.
+    pub fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> Result<Option<BTreeMap<LookKey, Stream>>> {
         let n = h.grid.nx * h.grid.nz;
         if frame.len() != n || n == 0 {
             return Err(BeamformError::ConfigMismatch {
@@ -282,7 +265,7 @@ impl PacketAssembler {
             });
         }
         let done = match self.packet {
-            Some(p) if p != h.packet => self.finish()?,
+            Some(p) if p != h.packet => Some(self.take()),
             _ => None,
         };
         self.packet = Some(h.packet);
@@ -297,9 +280,52 @@ impl PacketAssembler {
         Ok(done)
     }
 
+    /// The current packet's looks (empty if nothing is pending).
+    pub fn take(&mut self) -> BTreeMap<LookKey, Stream> {
+        std::mem::take(&mut self.streams)
+    }
+}
+/// (look, grid x0/z0/dx/dz, nx, nz, aperture as text), for the projection cache.
+type ProjectionKey = (LookKey, [u64; 4], usize, usize, String);
+
+/// Collects a packet's images per look and turns each finished packet into [`PacketProducts`].
+pub struct PacketAssembler {
+    params: PacketParams,
+    collector: LookCollector,
+    map: DopplerMap,
+    vec: VectorField,
+    projections: BTreeMap<ProjectionKey, Vec<[f32; 2]>>,
+}
+
+impl PacketAssembler {
+    /// Validates `params`.
+    pub fn new(params: PacketParams) -> Result<Self> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            collector: LookCollector::default(),
+            map: DopplerMap::default(),
+            vec: VectorField::default(),
+            projections: BTreeMap::new(),
+        })
+    }
+
+    /// Adds one image; returns the finished previous packet if this image starts a new one.
+    pub fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> Result<Option<PacketProducts>> {
+        match self.collector.push(h, frame)? {
+            Some(streams) => self.process(streams),
+            None => Ok(None),
+        }
+    }
+
     /// Finishes the current packet (end of stream); None if nothing is pending.
     pub fn finish(&mut self) -> Result<Option<PacketProducts>> {
-        let streams = std::mem::take(&mut self.streams);
+        let streams = self.collector.take();
+        self.process(streams)
+    }
+
+    /// Turns one packet's looks into its products.
+    fn process(&mut self, streams: BTreeMap<LookKey, Stream>) -> Result<Option<PacketProducts>> {
         let Some(first) = streams.values().next().map(|s| s.header.clone()) else {
             return Ok(None);
         };
