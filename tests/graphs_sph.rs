@@ -225,16 +225,23 @@ fn carotid_chain_on_a_coarse_lattice_reports_its_error_against_the_sph_truth() {
         assert!(lz < 0.05 && lx < 0.30, "loupas {field}: z {lz}, x {lx}");
         assert_ne!(l, &ac["packets"][0]["fields"][field], "loupas gave the autocorrelation's errors");
     }
+    // Speckle tracking on the same I/Q, in the same report (its figures are checked below).
+    let sp = read(re.join("evaluation-speckle.json"));
+    let s = &sp["packets"][0]["fields"]["raw"];
+    assert_eq!(s["pixels"], ac["packets"][0]["fields"]["raw"]["pixels"]);
+    eprintln!("replayed, speckle raw: |e|75 x {}, z {}", s["x"]["abs_p75"], s["z"]["abs_p75"]);
+    assert!(s["x"]["abs_p75"].as_f64().unwrap().is_finite() && s["z"]["abs_p75"].as_f64().unwrap().is_finite());
     let report = std::fs::read_to_string(re.join("report.md")).unwrap();
     assert!(
         report.contains("Error against ground truth: `autocorrelation`")
-            && report.contains("Error against ground truth: `loupas`"),
+            && report.contains("Error against ground truth: `loupas`")
+            && report.contains("Error against ground truth: `speckle`"),
         "{report}"
     );
     // Each labelled evaluator draws its own figures, beside the launcher's stage times.
     let mut figs = checked_figures(&re);
     figs.sort();
-    let want: Vec<String> = ["autocorrelation", "loupas"]
+    let want: Vec<String> = ["autocorrelation", "loupas", "speckle"]
         .iter()
         .flat_map(|l| ["doppler_maps", "error_histograms", "vector_field"].map(|f| format!("{f}-{l}.png")))
         .chain(["stage_times.png".to_string(), "bmode-autocorrelation.png".to_string()])
