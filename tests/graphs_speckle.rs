@@ -13,19 +13,22 @@ fn evaluation(dir: &std::path::Path) -> Evaluation {
     serde_json::from_str(&std::fs::read_to_string(dir.join("evaluation.json")).unwrap()).unwrap()
 }
 
-/// A plug band translating at 0.5 m/s along 20° on a 0.1 mm grid, lag 12 (5.6 px lateral,
-/// 2.1 px axial per pair): the bias of each component (gain − 1 over the image) stays below 2 %
-/// of the displacement. Measured (seeds 1–3): vx +0.9 … +1.4 %, vz −0.9 … −1.1 %.
+/// A plug band translating at 0.5 m/s along 20° on a 0.1 mm grid: the bias of each component
+/// (gain − 1 over the image) stays below 2 % of the displacement at lags 10 and 16 (4.7, 7.5 px
+/// lateral per pair) and at lag 12 on a second seed. Measured gains x / z: lag 10 1.012 / 1.015, lag 12
+/// 1.013 / 0.990 (seeds 1–3: x +0.9 … +1.4 %, z −0.9 … −1.1 %), lag 16 0.998 / 1.009; shorter lags
+/// are worse (lag 8 0.966, lag 4 1.071 in x: docs/nodes.md, "speckle-tracking").
 #[test]
 fn rigid_translation_bias_is_below_two_percent() {
-    for seed in [1, 2] {
+    for (seed, lag) in [(1, 10), (1, 16), (2, 12)] {
         let dir = tempfile::tempdir().unwrap();
-        run_graph_ok("tests/launch/plug-speckle.toml", dir.path(), &["--set", &format!("flow.seed={seed}")]);
+        let (seed_s, lag_s) = (format!("flow.seed={seed}"), format!("doppler.lag={lag}"));
+        run_graph_ok("tests/launch/plug-speckle.toml", dir.path(), &["--set", &seed_s, "--set", &lag_s]);
         let ev = evaluation(dir.path());
         let raw = &ev.packets[0].fields["raw"];
         let (gx, gz) = (raw.gain_x.unwrap(), raw.gain_z.unwrap());
-        println!("seed {seed}: gain x {gx:.4}, z {gz:.4}; no estimate {} of {}", raw.no_estimate, raw.pixels);
-        assert!((gx - 1.0).abs() < 0.02 && (gz - 1.0).abs() < 0.02, "seed {seed}: gains {gx} {gz}");
+        println!("seed {seed} lag {lag}: gain x {gx:.4}, z {gz:.4}; no estimate {} of {}", raw.no_estimate, raw.pixels);
+        assert!((gx - 1.0).abs() < 0.02 && (gz - 1.0).abs() < 0.02, "seed {seed} lag {lag}: gains {gx} {gz}");
         assert!(raw.pixels > 5000 && raw.no_estimate * 50 < raw.pixels, "{raw:?}");
     }
 }

@@ -303,6 +303,50 @@ fn bmode<'py>(py: Python<'py>, iq: PyReadonlyArrayDyn<'py, Complex<f64>>, dr: f6
     Ok(PyArray1::from_vec(py, img).into_any())
 }
 
+/// Speckle tracking (MUST `sptrack`) of real images `(P, M, N)` float64, frame-major, with the
+/// library's params as JSON; the last pass at its window centres: (di, dj, rho, valid) of shape
+/// (ni, nj) and the centres' rows and columns (0-based pixel centres).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn sptrack<'py>(
+    py: Python<'py>,
+    images: PyReadonlyArrayDyn<'py, f64>,
+    params_json: &str,
+) -> PyResult<(
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+)> {
+    let [p, m, n] = images.shape()[..] else {
+        return Err(value_error("I", format!("expected 3 axes (rows, columns, frames), got {:?}", images.shape())));
+    };
+    let params: sonoflow_doppler::SpeckleParams = from_json("param", params_json)?;
+    let data = contiguous("I", images.as_slice())?;
+    let frames: Vec<Vec<C32>> =
+        data.chunks(m * n).map(|f| f.iter().map(|v| C32::new(*v as f32, 0.0)).collect()).collect();
+    debug_assert_eq!(frames.len(), p);
+    let t = compute(py, || sonoflow_doppler::SpeckleTracker::new(params).and_then(|tr| tr.track(&[frames], m, n)))
+        .map_err(|e| value_error("sptrack", e))?;
+    let shape = [t.ni, t.nj];
+    let arr = |v: Vec<f64>| -> PyResult<Bound<'py, PyAny>> {
+        Ok(PyArray1::from_vec(py, v).reshape(shape).map_err(|e| value_error("sptrack", e))?.into_any())
+    };
+    let ic: Vec<f64> = (0..t.ni).map(|k| t.i_first + k as f64 * t.i_step).collect();
+    let jc: Vec<f64> = (0..t.nj).map(|k| t.j_first + k as f64 * t.j_step).collect();
+    let valid: Vec<f64> = t.valid.iter().map(|&v| f64::from(u8::from(v))).collect();
+    Ok((
+        arr(t.di)?,
+        arr(t.dj)?,
+        arr(t.rho)?,
+        arr(valid)?,
+        PyArray1::from_vec(py, ic).into_any(),
+        PyArray1::from_vec(py, jc).into_any(),
+    ))
+}
+
 /// MUST `tgc`'s gain per sample of sample-major I/Q (n_samples, n_lines) complex128.
 #[pyfunction]
 fn tgc_gain_iq<'py>(
@@ -743,6 +787,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tgc_gain_iq, m)?)?;
     m.add_function(wrap_pyfunction!(tgc_gain_rf, m)?)?;
     m.add_function(wrap_pyfunction!(genscat, m)?)?;
+    m.add_function(wrap_pyfunction!(sptrack, m)?)?;
     m.add_function(wrap_pyfunction!(pfield, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;

@@ -21,12 +21,12 @@ from . import _native
 from ._param import Options, Param
 from .graph import run
 from .must import (bmode, das, dasmtx, doppler_maps, genscat, getparam, iq2doppler, pfield, probes, rf2iq, simus,
-                   smoothn, tgc, txdelay, vector_doppler)
+                   smoothn, sptrack, tgc, txdelay, vector_doppler)
 from .node import Node
 from .recording import Message, Recording
 
 __all__ = ["Param", "Options", "getparam", "probes", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler",
-           "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat", "pfield", "set_threads", "threads", "run", "Recording", "Message", "Node"]
+           "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat", "pfield", "sptrack", "set_threads", "threads", "run", "Recording", "Message", "Node"]
 
 
 def set_threads(n):
