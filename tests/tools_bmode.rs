@@ -393,16 +393,26 @@ fn pfield_tool_matches_the_library_and_rejects_bad_input() {
         zs[imax]
     );
 
+    // Off the plane (--y 1 mm): MUST's elevation model, as the library's pfield_3d.
+    let (code, _, err) =
+        run("pfield", &["--param", "L11-5v", "--grid", grid, "--focus=-0.001,0.012", "--y", "0.001", "--out", s(&out)]);
+    assert_eq!(code, 0, "{err}");
+    let lib3 =
+        sonoflow_simus::pfield_3d(&probe, &medium, &tx, &xs, &vec![1e-3; xs.len()], &zs, &Default::default()).unwrap();
+    assert_eq!(npy::read(&out).unwrap().data, lib3.rms);
+    assert_ne!(lib3.rms, lib.rms);
+
     let o = s(&out);
     std::fs::remove_file(&out).unwrap();
     std::fs::remove_file(out.with_extension("json")).unwrap();
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
         (&["--param", "L11-5v", "--grid", grid], "give the transmit"),
         (&["--param", "L11-5v", "--grid", grid, "--tilt-deg", "3", "--focus", "0,0.01"], "one of"),
         (&["--param", "L11-5v", "--grid", grid, "--focus", "0,0"], "Z must be"),
         (&["--param", "L11-5v", "--grid", "1,2,3", "--tilt-deg", "0"], "--grid"),
         (&["--param", "no-probe", "--grid", grid, "--tilt-deg", "0"], "--param"),
         (&["--param", "L11-5v", "--grid", grid, "--tx-delay", "0,0"], "transmit.delays"),
+        (&["--param", "L11-5v", "--grid", grid, "--tilt-deg", "0", "--y", "NaN"], "pfield.y"),
     ];
     for (args, needle) in cases {
         let mut a = args.to_vec();

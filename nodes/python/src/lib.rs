@@ -151,12 +151,14 @@ fn simus<'py>(
     Ok((arr.into_any(), fs, t0))
 }
 
-/// MUST PFIELD (RMS pressure of one transmit) at points `x`, `z` (float64). `param_json` is a MUST
+/// MUST PFIELD (RMS pressure of one transmit) at points `x`, `z` (float64), and `y` (off the
+/// plane: MUST's elevation model) when given. `param_json` is a MUST
 /// param (`TXdelay` set), `options_json` a `PfieldOptions`. Returns (RP float64, IDX bool, df).
 #[pyfunction]
 fn pfield<'py>(
     py: Python<'py>,
     x: PyReadonlyArray1<'py, f64>,
+    y: Option<PyReadonlyArray1<'py, f64>>,
     z: PyReadonlyArray1<'py, f64>,
     param_json: &str,
     options_json: &str,
@@ -165,8 +167,15 @@ fn pfield<'py>(
     let options: sonoflow_simus::PfieldOptions = from_json("options", options_json)?;
     let transmit = parts.transmit.ok_or_else(|| PyValueError::new_err("delays: missing (param.TXdelay)"))?;
     let (xs, zs) = (contiguous("x", x.as_slice())?, contiguous("z", z.as_slice())?);
-    let field = compute(py, || sonoflow_simus::pfield(&parts.probe, &parts.medium, &transmit, xs, zs, &options))
-        .map_err(|e| value_error("pfield", e))?;
+    let ys = match &y {
+        Some(y) => Some(contiguous("y", y.as_slice())?),
+        None => None,
+    };
+    let field = compute(py, || match ys {
+        Some(ys) => sonoflow_simus::pfield_3d(&parts.probe, &parts.medium, &transmit, xs, ys, zs, &options),
+        None => sonoflow_simus::pfield(&parts.probe, &parts.medium, &transmit, xs, zs, &options),
+    })
+    .map_err(|e| value_error("pfield", e))?;
     Ok((PyArray1::from_vec(py, field.rms).into_any(), PyArray1::from_vec(py, field.idx).into_any(), field.df))
 }
 

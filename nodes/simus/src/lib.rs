@@ -78,7 +78,7 @@ pub use must::{MustParam, MustParts};
 pub use noise::{NoiseModel, NoiseParams};
 pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
 pub use phantom::{genscat, must_meandist, resolution_cell_area, Inclusion, Phantom, PhantomParams};
-pub use pressure::{pfield, PfieldOptions, PressureField};
+pub use pressure::{pfield, pfield_3d, PfieldOptions, PressureField};
 pub use probe::{Baffle, Probe, PRESET_NAMES};
 pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams, TransmitField};
 pub use scatterers::{ScattererSlices, Scatterers};

@@ -98,10 +98,12 @@ pub struct Probe {
     /// radius (convex array) is rejected by [`Probe::validate`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius: Option<f64>,
-    /// Elevation focus (m), MUST `focus`: accepted for compatibility, ignored by the 2-D model.
+    /// Elevation focus (m), MUST `focus`: used by [`crate::pfield_3d`] off the imaging plane,
+    /// ignored by SIMUS (2-D).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focus: Option<f64>,
-    /// Element height (m), MUST `height`: accepted for compatibility, ignored by the 2-D model.
+    /// Element height (m), MUST `height`: used by [`crate::pfield_3d`] off the imaging plane,
+    /// ignored by SIMUS (2-D).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height: Option<f64>,
 }

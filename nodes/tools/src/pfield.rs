@@ -1,6 +1,6 @@
 //! `sonoflow pfield`: MUST's PFIELD as a batch tool, a thin wrapper of
-//! `sonoflow_simus::pfield`: the RMS pressure field of one transmit of a linear array on a
-//! rectangular grid → float64 `.npy` of shape (nz, nx) and a JSON sidecar (grid, transmit,
+//! `sonoflow_simus::pfield_3d`: the RMS pressure field of one transmit of a linear array on a
+//! rectangular grid (in the imaging plane, or at an elevation `--y` off it) → float64 `.npy` of shape (nz, nx) and a JSON sidecar (grid, transmit,
 //! frequency band); optionally a PNG of the field in dB.
 
 use crate::simus::parse_file;
@@ -26,6 +26,10 @@ pub struct PfieldArgs {
     /// Transmit delays (s), comma-separated, one per element (NaN: element off).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub tx_delay: Option<Vec<f64>>,
+    /// Elevation of the grid's plane (m): non-zero puts every point at this y, off the imaging
+    /// plane, with MUST's elevation model (the probe's element `height` and elevation `focus`).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub y: f64,
     /// PFIELD options (`.json`/`.toml`: dBThresh, FrequencyStep, FullFrequencyDirectivity,
     /// ElementSplitting).
     #[arg(long)]
@@ -119,7 +123,9 @@ pub fn run_pfield(a: &PfieldArgs) -> anyhow::Result<i32> {
         }
     }
     let start = std::time::Instant::now();
-    let field = sonoflow_simus::pfield(&probe, &medium, &transmit, &xs, &zs, &options)?;
+    let ys = vec![a.y; xs.len()];
+    let field = sonoflow_simus::pfield_3d(&probe, &medium, &transmit, &xs, &ys, &zs, &options)
+        .map_err(|e| anyhow::anyhow!("{e}").context(format!("--y {}", a.y)))?;
     let secs = start.elapsed().as_secs_f64();
     let max = field.rms.iter().copied().fold(0.0, f64::max);
     let png = match &a.png {
@@ -143,6 +149,7 @@ pub fn run_pfield(a: &PfieldArgs) -> anyhow::Result<i32> {
     }
     let sidecar = serde_json::json!({
         "grid": grid,
+        "y": a.y,
         "transmit": what,
         "delays": transmit.delays,
         "options": options,

@@ -612,8 +612,10 @@ def genscat(roidim, meandist, I=None, g=None, *, seed=0, inclusions=None, z0=0.0
 
 def pfield(x, y, z, delaysTX, param, isQuick=False, options=None):
     """RMS pressure field of one transmit (MUST ``pfield``): ``RP, SPECT, IDX = pfield(x, y, z,
-    delaysTX, param[, isQuick][, options])``. ``x``, ``z`` any shape (RP has it), ``y`` ``None``,
-    empty or zeros (the 2-D field), ``delaysTX`` one row of ``txdelay`` (s, NaN: element off),
+    delaysTX, param[, isQuick][, options])``. ``x``, ``z`` any shape (RP has it); ``y`` ``None``,
+    empty or zeros: the 2-D field; a ``y`` of x's shape with any |y| ≥ 1e-9 m: MUST's elevation
+    model (3-D distances, 1/r, the multi-Gaussian beam of an element of ``param.height`` focused at
+    ``param.focus`` in elevation, both ∞ when unset); ``delaysTX`` one row of ``txdelay`` (s, NaN: element off),
     ``param`` with ``TXapodization``, ``attenuation``, ``baffle``… as in ``simus``; ``options``:
     ``dBThresh`` (−60), ``FrequencyStep``, ``FullFrequencyDirectivity``, ``ElementSplitting``;
     ``isQuick=True`` sets MUST's quick options (−20 dB, one sub-element, step 1.5). IDX: the
@@ -621,15 +623,20 @@ def pfield(x, y, z, delaysTX, param, isQuick=False, options=None):
 
     Differences: ``SPECT`` is ``None`` (the per-frequency field is not returned); phasors are
     stepped in float64 (PyMUST: complex64), so the fields agree to PyMUST's own float32 error
-    (nRMS ~1e-6); 2-D only (a non-zero ``y`` — elevation — is refused); linear arrays only."""
+    (nRMS ~1e-6); linear arrays only."""
     if isinstance(isQuick, dict) or hasattr(isQuick, "keys"):
         isQuick, options = False, isQuick
     xa = _array(x, "x", np.float64)
     za = _array(z, "z", np.float64)
     if xa.shape != za.shape:
         raise ValueError(f"x, z: must have the same shape, got {xa.shape}, {za.shape}")
-    if y is not None and np.size(y) and np.any(np.abs(_array(y, "y", np.float64)) >= 1e-9):
-        raise ValueError("y: elevation (a non-zero y) is not supported: sonoflow's pfield is 2-D (give y=None)")
+    ya = None
+    if y is not None and np.size(y):
+        ya = _array(y, "y", np.float64)
+        if ya.shape != xa.shape:
+            raise ValueError(f"y: must have the shape of x, got {ya.shape}, {xa.shape}")
+        if not np.any(np.abs(ya) >= 1e-9):
+            ya = None  # PyMUST: the 2-D field
     p = canonical(param)
     d_in = _array(delaysTX, "delaysTX", np.float64, allow_nan=True)
     if d_in.ndim == 2 and d_in.shape[0] != 1:
@@ -645,7 +652,8 @@ def pfield(x, y, z, delaysTX, param, isQuick=False, options=None):
     if isQuick:
         o.update(db_thresh=-20.0, element_splitting=1, full_frequency_directivity=False, frequency_step=1.5)
     o.setdefault("db_thresh", -60.0)
-    rp, idx, _df = _native.pfield(xa.reshape(-1), za.reshape(-1), dumps(pj), dumps(o))
+    yv = None if ya is None else ya.reshape(-1)
+    rp, idx, _df = _native.pfield(xa.reshape(-1), yv, za.reshape(-1), dumps(pj), dumps(o))
     return rp.reshape(xa.shape), None, idx
 
 
