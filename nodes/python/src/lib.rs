@@ -120,7 +120,7 @@ fn txdelay<'py>(py: Python<'py>, param_json: &str, kind: &str, a: f64, b: f64) -
 }
 
 /// SIMUS RF of one transmit. `param_json` is a MUST param (`TXdelay` set), `options_json` a
-/// `SimusOptions`. Returns (rf (n_elements, n_samples) float32, element-major; fs; t0).
+/// `SimusOptions`; `y` (scatterers off the plane): MUST's elevation model. Returns (rf (n_elements, n_samples) float32, element-major; fs; t0).
 #[pyfunction]
 fn simus<'py>(
     py: Python<'py>,
@@ -129,6 +129,7 @@ fn simus<'py>(
     rc: PyReadonlyArray1<'py, f32>,
     param_json: &str,
     options_json: &str,
+    y: Option<PyReadonlyArray1<'py, f32>>,
 ) -> PyResult<(Bound<'py, PyAny>, f64, f64)> {
     let parts = from_json::<MustParam>("param", param_json)?.into_parts().map_err(|e| value_error("param", e))?;
     let mut options: SimusOptions = from_json("options", options_json)?;
@@ -145,7 +146,15 @@ fn simus<'py>(
     scat.validate().map_err(|e| value_error("scatterers", e))?;
     let n_el = parts.probe.n_elements;
     let mut simus = Simus::new(parts.probe, parts.medium, options).map_err(|e| value_error("simus", e))?;
-    let rf = compute(py, || simus.simulate(scat, &transmit)).map_err(|e| value_error("simus", e))?;
+    let ys = match &y {
+        Some(y) => Some(contiguous("y", y.as_slice())?),
+        None => None,
+    };
+    let rf = compute(py, || match ys {
+        Some(ys) => simus.simulate_3d(scat, ys, &transmit),
+        None => simus.simulate(scat, &transmit),
+    })
+    .map_err(|e| value_error("simus", e))?;
     let (ns, fs, t0) = (rf.n_samples, rf.fs, rf.t0);
     let arr = PyArray1::from_vec(py, rf.data).reshape([n_el, ns])?;
     Ok((arr.into_any(), fs, t0))

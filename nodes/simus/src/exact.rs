@@ -14,7 +14,29 @@ pub(crate) struct Tables64 {
     pub d_im: Vec<f64>,
 }
 
-/// Adds block `blk` into `u` (`[bin - bins.start][re, im][e_pad]`) for the band bins `bins`.
+/// MUST's elevation model for one block of scatterers off the imaging plane
+/// ([`crate::Simus::simulate_3d_into`]): each element's pattern times the MGBM factor of the
+/// scatterer, recomputed at the band bins `mgbm_bins` (MUST: `max(3, round(n/20))` of them) and
+/// held in between.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ElevationBlock {
+    /// Elevation of each scatterer of the block (m), padding 0.
+    pub y: Vec<f64>,
+    /// Mean distance over the sub-elements, `[scatterer][e_pad]`.
+    pub rm: Vec<f64>,
+    /// Element height, elevation focus (∞: unset), speed of sound.
+    pub h: f64,
+    pub rf: f64,
+    pub c: f64,
+    /// MUST's branch when every |y| is below f32's ε.
+    pub planar: bool,
+    /// Band-relative bins where MUST recomputes the factor (ascending, starts at 0).
+    pub mgbm_bins: Vec<usize>,
+}
+
+/// Adds block `blk` into `u` (`[bin - bins.start][re, im][e_pad]`) for the band bins `bins`;
+/// with `elev`, each element's pattern is multiplied by the scatterer's MGBM factor.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn accumulate_exact(
     geom: &ArrayGeom,
     blk: &BlockGeom,
@@ -23,11 +45,32 @@ pub(crate) fn accumulate_exact(
     bins: Range<usize>,
     u: &mut [f64],
     rbuf: &mut Vec<f64>,
+    elev: Option<&ElevationBlock>,
 ) {
     let ep = geom.e_pad;
     rbuf.resize(2 * ep, 0.0);
+    let mut g: Vec<num_complex::Complex<f64>> = Vec::new();
+    let mut g_bin = usize::MAX;
     for (kl, k) in bins.enumerate() {
         let f = freqs[k];
+        if let Some(el) = elev {
+            let at = el.mgbm_bins.iter().copied().filter(|b| *b <= k).max().unwrap_or(0);
+            if at != g_bin {
+                g_bin = at;
+                let kw = 2.0 * std::f64::consts::PI * freqs[at] / el.c;
+                g.clear();
+                for s in 0..blk.n_s {
+                    for e in 0..ep {
+                        let rm = el.rm[s * ep + e];
+                        g.push(if rm > 0.0 {
+                            crate::pressure::mgbm(kw, el.y[s], rm, el.h, el.rf, el.planar)
+                        } else {
+                            num_complex::Complex::new(0.0, 0.0)
+                        });
+                    }
+                }
+            }
+        }
         let (d_re, d_im) = (&tab.d_re[k * ep..(k + 1) * ep], &tab.d_im[k * ep..(k + 1) * ep]);
         for s in 0..blk.n_s {
             let rc = blk.rc[s];
@@ -52,6 +95,12 @@ pub(crate) fn accumulate_exact(
                         r_re[e] += pr;
                         r_im[e] += pi;
                     }
+                }
+            }
+            if elev.is_some() {
+                for e in 0..ep {
+                    let v = g[s * ep + e] * num_complex::Complex::new(r_re[e], r_im[e]);
+                    (r_re[e], r_im[e]) = (v.re, v.im);
                 }
             }
             let (mut tr, mut ti) = (0.0, 0.0);

@@ -47,8 +47,10 @@
 //!
 //! Differences from PyMUST (all below its own 3e-5 float32 error): distances are kept in f64
 //! (PyMUST rounds them to f32), the phasor recursion is re-anchored (PyMUST drifts by up to
-//! 3.3e-5 rad across the band), sums and the inverse FFT are f64. Elevation (3-D), convex arrays,
-//! chirps (`TXfreqsweep`), receive delays and MLT (several delay rows) are not implemented.
+//! 3.3e-5 rad across the band), sums and the inverse FFT are f64. Scatterers off the imaging
+//! plane ([`Simus::simulate_3d`]) get MUST's elevation model (element height, elevation focus,
+//! MGBM) on the exact kernel. Convex arrays, chirps (`TXfreqsweep`), receive delays and MLT
+//! (several delay rows) are not implemented.
 
 mod error;
 mod exact;

@@ -127,7 +127,7 @@ pub fn pfield_3d(
 }
 
 /// MUST's elevation parameters: (element height, elevation focus), ∞ when unset.
-fn elevation_params(probe: &Probe) -> Result<(f64, f64)> {
+pub(crate) fn elevation_params(probe: &Probe) -> Result<(f64, f64)> {
     let h = probe.height.unwrap_or(f64::INFINITY);
     let rf = probe.focus.unwrap_or(f64::INFINITY);
     if h.is_nan() || h <= 0.0 {
@@ -137,6 +137,18 @@ fn elevation_params(probe: &Probe) -> Result<(f64, f64)> {
         return Err(invalid("param.focus", rf, "> 0 m (∞: no elevation focus)"));
     }
     Ok((h, rf))
+}
+
+/// The band bins (0-based, of `n_bins`) where MUST recomputes the MGBM factor:
+/// `round(linspace(1, n, max(3, round(n/20)))) − 1` (numpy's round: half to even).
+pub(crate) fn mgbm_bins(n_bins: usize) -> Vec<usize> {
+    let nm = ((n_bins as f64 / 20.0).round_ties_even() as usize).max(3);
+    (0..nm)
+        .map(|j| {
+            let v = 1.0 + (n_bins as f64 - 1.0) * j as f64 / (nm - 1) as f64;
+            (v.round_ties_even() as usize).saturating_sub(1)
+        })
+        .collect()
 }
 
 /// MUST's `MGBMcoeff(4)`: A_n, B_n of `rect(y) ≈ Σ A_n exp(−B_n y²)`.
@@ -149,7 +161,7 @@ type C64 = num_complex::Complex<f64>;
 /// `Σ A_n √(π t) exp(kw² β²/4 t + kw γ)`, `t = 1/(kw α + B_n/h²)`, `α = i/2 (1/R_f − 1/r_m)`,
 /// `γ = i y²/(2 r_m)`, `β² = −(y/r_m)²` (`planar`: all |y| below f32's ε, MUST's branch without
 /// the y terms).
-fn mgbm(kw: f64, y: f64, rm: f64, h: f64, rf: f64, planar: bool) -> C64 {
+pub(crate) fn mgbm(kw: f64, y: f64, rm: f64, h: f64, rf: f64, planar: bool) -> C64 {
     let alpha = C64::new(0.0, 0.5 * (1.0 / rf - 1.0 / rm));
     let gamma = C64::new(0.0, y * y / (2.0 * rm));
     let beta2 = -(y / rm) * (y / rm);
@@ -301,17 +313,7 @@ fn pfield_impl(
     let cor = if y.is_some() { df } else { df * geom.width };
     // MUST recomputes the MGBM at these band bins only (0-based), holding it in between.
     let n_bins = bins.len();
-    let mgbm_bins: Vec<usize> = if y.is_some() {
-        let nm = ((n_bins as f64 / 20.0).round_ties_even() as usize).max(3);
-        (0..nm)
-            .map(|j| {
-                let v = 1.0 + (n_bins as f64 - 1.0) * j as f64 / (nm - 1) as f64;
-                v.round_ties_even() as usize - 1
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let mgbm_bins: Vec<usize> = if y.is_some() { mgbm_bins(n_bins) } else { Vec::new() };
     let planar = y.is_some_and(|y| y.iter().all(|v| (v.abs() as f32) < f32::EPSILON));
     let e_of: Vec<usize> = {
         let mut e_of = vec![usize::MAX; per];

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner};
 
 use crate::error::{Result, SimusError};
-use crate::exact::{accumulate_exact, Tables64};
+use crate::exact::{accumulate_exact, ElevationBlock, Tables64};
 use crate::grid::{FrequencyPlan, PlanInputs};
 use crate::kernel::simd::Simd;
 use crate::kernel::{Scratch, Tables, G, L, TX_COMPLEX, TX_REAL, TX_UNIT, V};
@@ -207,8 +207,68 @@ impl Simus {
         plan: &FrequencyPlan,
         out: &mut [f32],
     ) -> Result<()> {
+        self.simulate_impl(scatterers.into(), None, transmit, plan, out)
+    }
+
+    /// [`Simus::simulate`] for scatterers off the imaging plane at elevations `y` (m, one per
+    /// scatterer): with any |y| ≥ 1e-9 m, MUST's elevation model (PyMUST's rule; otherwise
+    /// exactly [`Simus::simulate`]): 3-D distances, 1/r spreading both ways, no element-width
+    /// factor, and each element's pattern times the multi-Gaussian beam (MGBM) of an element of
+    /// `probe.height` focused at `probe.focus` in elevation (∞ when unset), on transmit and on
+    /// receive, recomputed at MUST's `max(3, round(n/20))` band frequencies. The plan is the 2-D
+    /// one (MUST's SIMUS too ignores y there). Evaluated with the exact f64 kernel whatever
+    /// `accuracy` says (slower than the fast kernel: every phasor computed directly).
+    pub fn simulate_3d<'a>(
+        &mut self,
+        scatterers: impl Into<ScattererSlices<'a>>,
+        y: &[f32],
+        transmit: &Transmit,
+    ) -> Result<RfFrame> {
         let s = scatterers.into();
+        let plan = self.plan(s, transmit)?;
+        let n_el = self.probe.n_elements;
+        let mut data = vec![0.0f32; n_el * plan.n_samples];
+        self.simulate_3d_into(s, y, transmit, &plan, &mut data)?;
+        Ok(RfFrame { data, n_elements: n_el, n_samples: plan.n_samples, fs: plan.fs, t0: plan.t0, plan })
+    }
+
+    /// [`Simus::simulate_3d`] with a given plan into `out` (as [`Simus::simulate_into`]).
+    pub fn simulate_3d_into<'a>(
+        &mut self,
+        scatterers: impl Into<ScattererSlices<'a>>,
+        y: &[f32],
+        transmit: &Transmit,
+        plan: &FrequencyPlan,
+        out: &mut [f32],
+    ) -> Result<()> {
+        let s = scatterers.into();
+        if y.len() != s.len() {
+            return Err(SimusError::LengthMismatch { field: "scatterers.y", got: y.len(), expected: s.len() });
+        }
+        if let Some(i) = (0..y.len()).find(|&i| !(y[i].is_finite() && f64::from(y[i]).abs() <= 100.0)) {
+            return Err(crate::error::invalid("scatterers.y", format!("{} at row {i}", y[i]), "finite, |y| ≤ 100 m"));
+        }
+        let elevation = y.iter().any(|v| f64::from(*v).abs() >= 1e-9);
+        self.simulate_impl(s, elevation.then_some(y), transmit, plan, out)
+    }
+
+    fn simulate_impl(
+        &mut self,
+        s: ScattererSlices<'_>,
+        y: Option<&[f32]>,
+        transmit: &Transmit,
+        plan: &FrequencyPlan,
+        out: &mut [f32],
+    ) -> Result<()> {
         s.validate()?;
+        let elev = match y {
+            Some(y) => {
+                let (h, rf) = crate::pressure::elevation_params(&self.probe)?;
+                let planar = y.iter().all(|v| v.abs() < f32::EPSILON);
+                Some((y, h, rf, planar))
+            }
+            None => None,
+        };
         let n_el = self.probe.n_elements;
         transmit.validate(n_el)?;
         self.check_plan(plan)?;
@@ -226,11 +286,11 @@ impl Simus {
         self.prepare(plan, transmit);
         let pool = self.pool.take();
         match &pool {
-            Some(p) => p.install(|| self.accumulate(s, plan)),
-            None => self.accumulate(s, plan),
+            Some(p) => p.install(|| self.accumulate(s, plan, elev)),
+            None => self.accumulate(s, plan, elev),
         }
         self.pool = pool;
-        self.spectra_to_rf(plan, out);
+        self.spectra_to_rf(plan, out, elev.is_none());
         if self.options.zero_small_values {
             zero_small_values(out);
         }
@@ -306,23 +366,35 @@ impl Simus {
     }
 
     /// Streams the scatterers block by block into the tasks' accumulators.
-    fn accumulate(&mut self, s: ScattererSlices<'_>, plan: &FrequencyPlan) {
-        let block = match self.options.accuracy {
-            Accuracy::Fast { scatterer_block, .. } => scatterer_block as usize,
-            Accuracy::Exact => 64,
+    fn accumulate(&mut self, s: ScattererSlices<'_>, plan: &FrequencyPlan, elev: Option<Elevation<'_>>) {
+        let block = match (&self.options.accuracy, elev) {
+            (Accuracy::Fast { scatterer_block, .. }, None) => *scatterer_block as usize,
+            _ => 64,
         };
-        let exact = matches!(self.options.accuracy, Accuracy::Exact);
+        let exact = matches!(self.options.accuracy, Accuracy::Exact) || elev.is_some();
         let geom = &self.geom;
         let simd = self.simd;
         let ws = &mut self.ws;
+        let mut eb = elev.map(|(_, h, rf, planar)| ElevationBlock {
+            h,
+            rf,
+            c: self.medium.c,
+            planar,
+            mgbm_bins: crate::pressure::mgbm_bins(ws.tab.freqs.len()),
+            ..Default::default()
+        });
         let mut start = 0;
         while start < s.len() {
             let end = (start + block).min(s.len());
             setup_block(geom, simd, &s, start..end, plan.df, &mut ws.blk);
+            if let (Some(eb), Some((y, ..))) = (eb.as_mut(), elev) {
+                elevate_block(geom, &s, &y[start..end], start..end, &mut ws.blk, eb);
+            }
             let (blk, tab, tab64) = (&ws.blk, &ws.tab, &ws.tab64);
+            let ebr = eb.as_ref();
             ws.tasks.par_iter_mut().for_each(|t| {
                 if exact {
-                    accumulate_exact(geom, blk, tab64, &tab.freqs, t.bins.clone(), &mut t.u, &mut t.rbuf);
+                    accumulate_exact(geom, blk, tab64, &tab.freqs, t.bins.clone(), &mut t.u, &mut t.rbuf, ebr);
                 } else {
                     simd.accumulate(geom, blk, tab, t.bins.clone(), &mut t.sc);
                     fold(&mut t.sc, &mut t.u, geom.e_pad);
@@ -333,7 +405,7 @@ impl Simus {
     }
 
     /// Scales the accumulated spectra (`P H² df W`) and transforms them to RF.
-    fn spectra_to_rf(&mut self, plan: &FrequencyPlan, out: &mut [f32]) {
+    fn spectra_to_rf(&mut self, plan: &FrequencyPlan, out: &mut [f32], width_factor: bool) {
         let n = plan.n_fft;
         let ws = &mut self.ws;
         if ws.fft_len != n || ws.fft.is_none() {
@@ -352,7 +424,7 @@ impl Simus {
         ws.scale.extend(ws.tab.freqs.iter().map(|&f| {
             let w = 2.0 * std::f64::consts::PI * f;
             let h = self.plan_inputs.pulse.probe(w);
-            self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * self.geom.width
+            self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * if width_factor { self.geom.width } else { 1.0 }
         }));
         let scale = &ws.scale;
         let inv_n = 1.0 / n as f64;
@@ -388,6 +460,49 @@ impl Simus {
 /// Geometry and steppers of scatterers `range`, padded with silent scatterers to a multiple of
 /// the receive group size, in parallel over scatterers (pure per-scatterer work: the result does
 /// not depend on the thread count).
+/// A 3-D scene: the scatterers' elevations, element height, elevation focus, MUST's planar
+/// branch.
+type Elevation<'a> = (&'a [f32], f64, f64, bool);
+
+/// Turns a block's 2-D geometry into MUST's elevation geometry: 3-D distances (clamped to λ/2),
+/// 1/r instead of 1/√r, and each element's mean distance over its sub-elements for the MGBM.
+fn elevate_block(
+    geom: &ArrayGeom,
+    s: &ScattererSlices<'_>,
+    y: &[f32],
+    range: std::ops::Range<usize>,
+    blk: &mut BlockGeom,
+    eb: &mut ElevationBlock,
+) {
+    let ep = geom.e_pad;
+    let nc = ep / L;
+    eb.y.clear();
+    eb.y.resize(blk.n_s, 0.0);
+    eb.rm.clear();
+    eb.rm.resize(blk.n_s * ep, 0.0);
+    let (x, z) = (&s.x[range.clone()], &s.z[range]);
+    for (i, (&yi, (&xi, &zi))) in y.iter().zip(x.iter().zip(z)).enumerate() {
+        let (xp, zp, yp) = (f64::from(xi), f64::from(zi), f64::from(yi));
+        eb.y[i] = yp;
+        for c in 0..nc {
+            for m in 0..geom.m {
+                let base = ((i * nc + c) * geom.m + m) * L;
+                for l in 0..L {
+                    let e = c * L + l;
+                    if e >= geom.n_el {
+                        continue;
+                    }
+                    let dx = xp - geom.xi[m] - geom.xe[e];
+                    let r3 = (dx * dx + zp * zp + yp * yp).sqrt().max(geom.r_min);
+                    blk.amp[base + l] *= blk.r[base + l].sqrt() / r3;
+                    blk.r[base + l] = r3;
+                    eb.rm[i * ep + e] += r3 / geom.m as f64;
+                }
+            }
+        }
+    }
+}
+
 fn setup_block(
     geom: &ArrayGeom,
     simd: Simd,

@@ -220,3 +220,32 @@ fn transmit_helpers_follow_must_txdelay() {
     assert!(Transmit::focused(&p, c, 0.0, -0.01).is_err());
     assert!(Transmit::plane_wave(&p, c, 2.0).is_err());
 }
+
+#[test]
+fn simulate_3d_in_the_plane_is_simulate_and_is_symmetric_in_y() {
+    let probe = Probe::preset("L11-5v").unwrap();
+    let medium = Medium::default();
+    let tx = Transmit::plane_wave(&probe, medium.c, 0.05).unwrap();
+    let scat = Scatterers::new(vec![1e-3, -2e-3, 0.5e-3], vec![15e-3, 22e-3, 30e-3], vec![1.0, 0.7, 1.2]).unwrap();
+    let mut sim = Simus::new(probe.clone(), medium.clone(), SimusOptions::default()).unwrap();
+    let flat = sim.simulate(&scat, &tx).unwrap();
+    assert_eq!(sim.simulate_3d(&scat, &[0.0; 3], &tx).unwrap().data, flat.data);
+    let up = sim.simulate_3d(&scat, &[1e-3, -0.5e-3, 2e-3], &tx).unwrap();
+    let down = sim.simulate_3d(&scat, &[-1e-3, 0.5e-3, -2e-3], &tx).unwrap();
+    assert_eq!(up.data, down.data);
+    assert_eq!(up.n_samples, flat.n_samples, "the plan is the 2-D one");
+    // the elevation model forces the exact kernel: the Exact option gives the same bits
+    let mut exact =
+        Simus::new(probe.clone(), medium.clone(), SimusOptions { accuracy: Accuracy::Exact, ..Default::default() })
+            .unwrap();
+    assert_eq!(exact.simulate_3d(&scat, &[1e-3, -0.5e-3, 2e-3], &tx).unwrap().data, up.data);
+    let err = |r: Result<RfFrame>| r.unwrap_err().to_string();
+    assert!(err(sim.simulate_3d(&scat, &[0.0; 2], &tx)).contains("scatterers.y"));
+    assert!(err(sim.simulate_3d(&scat, &[f32::NAN; 3], &tx)).contains("scatterers.y"));
+    let mut flat_el = probe;
+    flat_el.height = Some(-1.0);
+    match Simus::new(flat_el, medium, SimusOptions::default()) {
+        Err(e) => assert!(e.to_string().contains("height"), "{e}"),
+        Ok(mut b) => assert!(err(b.simulate_3d(&scat, &[1e-3; 3], &tx)).contains("param.height")),
+    }
+}

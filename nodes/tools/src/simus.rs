@@ -1,5 +1,6 @@
 //! `sonoflow simus`: the SIMUS batch tool. Scatterers from CSV (`x,z,rc` columns, metres,
-//! metres, amplitude) or `.npy` (shape (n, 3)), MUST-style parameters from JSON or TOML, RF to
+//! metres, amplitude; `x,y,z,rc` off the imaging plane: MUST's elevation model) or `.npy` (shape
+//! (n, 3) or (n, 4)), MUST-style parameters from JSON or TOML, RF to
 //! `.npy` of shape (n_samples, n_elements) plus a JSON sidecar with fs, t0 and the frequency plan.
 
 use sonoflow_simus::{MustParam, Probe, Scatterers, Simus, SimusOptions, Transmit};
@@ -8,7 +9,9 @@ use std::path::{Path, PathBuf};
 /// Arguments of `sonoflow simus`.
 #[derive(clap::Args, Debug)]
 pub struct SimusArgs {
-    /// Scatterers: `.csv` with columns x,z,rc (header line optional) or `.npy` of shape (n, 3).
+    /// Scatterers: `.csv` with columns x,z,rc (header line optional) or `.npy` of shape (n, 3);
+    /// with a y column (x,y,z,rc; (n, 4)) off the imaging plane, MUST's elevation model (element
+    /// height and elevation focus of the probe).
     #[arg(long)]
     pub scatterers: PathBuf,
     /// MUST-style parameters (`.json` or `.toml`): fc, pitch, kerf|width, Nelements, bandwidth,
@@ -48,21 +51,24 @@ pub(crate) fn parse_file<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow:
     }
 }
 
-/// Reads scatterers from CSV or npy.
-pub fn read_scatterers(path: &Path) -> anyhow::Result<Scatterers> {
+/// Reads scatterers from CSV (`x,z,rc`, or `x,y,z,rc` off the imaging plane) or npy ((n, 3) or
+/// (n, 4) with the same columns); the elevations y when the file has them.
+pub fn read_scatterers(path: &Path) -> anyhow::Result<(Scatterers, Option<Vec<f32>>)> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let (mut x, mut z, mut rc) = (Vec::new(), Vec::new(), Vec::new());
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    let mut width = 0;
     match ext.as_str() {
         "npy" => {
             let a = sonoflow_fileio::npy::read(path)?;
-            if a.shape.len() != 2 || a.shape[1] != 3 {
-                anyhow::bail!("{}: shape {:?}, expected (n, 3) with columns x, z, rc", path.display(), a.shape);
+            if a.shape.len() != 2 || !(a.shape[1] == 3 || a.shape[1] == 4) {
+                anyhow::bail!(
+                    "{}: shape {:?}, expected (n, 3) with columns x, z, rc or (n, 4) with x, y, z, rc",
+                    path.display(),
+                    a.shape
+                );
             }
-            for r in a.data.chunks_exact(3) {
-                x.push(r[0] as f32);
-                z.push(r[1] as f32);
-                rc.push(r[2] as f32);
-            }
+            width = a.shape[1];
+            rows.extend(a.data.chunks_exact(width).map(<[f64]>::to_vec));
         }
         "csv" => {
             let text = read_table(path)?;
@@ -73,32 +79,46 @@ pub fn read_scatterers(path: &Path) -> anyhow::Result<Scatterers> {
                 }
                 let cols: Vec<&str> = line.split(',').map(str::trim).collect();
                 if i == 0 && cols.iter().any(|c| c.parse::<f64>().is_err()) {
-                    if cols != ["x", "z", "rc"] {
-                        anyhow::bail!("{}: header {:?}, expected x,z,rc", path.display(), cols);
+                    if cols != ["x", "z", "rc"] && cols != ["x", "y", "z", "rc"] {
+                        anyhow::bail!("{}: header {:?}, expected x,z,rc or x,y,z,rc", path.display(), cols);
                     }
+                    width = cols.len();
                     continue;
                 }
-                if cols.len() != 3 {
-                    anyhow::bail!("{} line {}: {} columns, expected x,z,rc", path.display(), i + 1, cols.len());
+                if width == 0 {
+                    width = cols.len();
+                }
+                if cols.len() != width || !(width == 3 || width == 4) {
+                    anyhow::bail!(
+                        "{} line {}: {} columns, expected x,z,rc or x,y,z,rc throughout",
+                        path.display(),
+                        i + 1,
+                        cols.len()
+                    );
                 }
                 let v: Vec<f64> = cols
                     .iter()
                     .map(|c| c.parse::<f64>())
                     .collect::<Result<_, _>>()
                     .map_err(|e| anyhow::anyhow!("{} line {}: {e}", path.display(), i + 1))?;
-                x.push(v[0] as f32);
-                z.push(v[1] as f32);
-                rc.push(v[2] as f32);
+                rows.push(v);
             }
         }
-        _ => anyhow::bail!("{}: scatterers must be .csv (x,z,rc) or .npy (n, 3)", path.display()),
+        _ => {
+            anyhow::bail!("{}: scatterers must be .csv (x,z,rc or x,y,z,rc) or .npy ((n, 3) or (n, 4))", path.display())
+        }
     }
-    Ok(Scatterers::new(x, z, rc)?)
+    let col = |k: usize| rows.iter().map(|r| r[k] as f32).collect::<Vec<f32>>();
+    if width == 4 {
+        Ok((Scatterers::new(col(0), col(2), col(3))?, Some(col(1))))
+    } else {
+        Ok((Scatterers::new(col(0), col(1), col(2))?, None))
+    }
 }
 
 /// Runs the batch tool.
 pub fn run_simus(a: &SimusArgs) -> anyhow::Result<i32> {
-    let scat = read_scatterers(&a.scatterers)?;
+    let (scat, y) = read_scatterers(&a.scatterers)?;
     let p = Path::new(&a.param);
     let (probe, medium, mut transmit, fs) = if p.exists() {
         let mp: MustParam = parse_file(p)?;
@@ -134,7 +154,10 @@ pub fn run_simus(a: &SimusArgs) -> anyhow::Result<i32> {
     let n_el = probe.n_elements;
     let mut simus = Simus::new(probe, medium, options)?;
     let start = std::time::Instant::now();
-    let rf = simus.simulate(&scat, &transmit)?;
+    let rf = match &y {
+        Some(y) => simus.simulate_3d(&scat, y, &transmit)?,
+        None => simus.simulate(&scat, &transmit)?,
+    };
     let secs = start.elapsed().as_secs_f64();
     sonoflow_fileio::npy::write_f32(&a.out, &[rf.n_samples, n_el], true, &rf.data)?;
     let sidecar = serde_json::json!({

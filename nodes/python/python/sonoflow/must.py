@@ -155,26 +155,38 @@ def _options_json(options):
 
 def simus(*args):
     """RF signals of a linear array (MUST ``simus``): ``RF, spectrum = simus(x, z, RC, delaysTX,
-    param[, options])``. ``x``, ``z``, ``RC`` any shape (flattened), ``delaysTX`` one row of
+    param[, options])`` or ``simus(x, y, z, RC, delaysTX, param[, options])`` with scatterers off
+    the imaging plane (any |y| ≥ 1e-9 m: MUST's elevation model — 3-D distances, the
+    multi-Gaussian beam of ``param.height`` focused at ``param.focus`` in elevation, on transmit and
+    receive — computed with the exact float64 kernel, slower). ``x``, ``z``, ``RC`` any shape (flattened), ``delaysTX`` one row of
     ``txdelay``; RF has shape (n_samples, Nelements), sample k at k/fs (fs = ``param.fs``, default
     4 fc; ``param.fs`` is set as PyMUST does).
 
     Differences: RF is float32 (PyMUST float64; the RFs agree to nRMS ~2e-5) and a
     Fortran-ordered view of sonoflow's element-major buffer (no copy); the second output is
-    ``None`` (PyMUST's RF spectrum is not returned); 2-D only (no elevation ``y``); linear arrays
-    only; chirps (``TXfreqsweep``) are refused."""
-    if len(args) not in (5, 6):
-        raise TypeError("simus: use simus(x, z, RC, delaysTX, param[, options])")
-    x, z, rc, delays, param = args[:5]
-    options = args[5] if len(args) == 6 else None
+    ``None`` (PyMUST's RF spectrum is not returned); linear arrays only; chirps (``TXfreqsweep``)
+    are refused."""
+    if len(args) not in (5, 6, 7):
+        raise TypeError("simus: use simus(x, z, RC, delaysTX, param[, options]) or simus(x, y, z, RC, delaysTX, param[, options])")
+    if len(args) == 7 or (len(args) == 6 and not hasattr(args[4], "keys")):
+        x, y, z, rc, delays, param = args[:6]
+        options = args[6] if len(args) == 7 else None
+    else:
+        x, z, rc, delays, param = args[:5]
+        y, options = None, (args[5] if len(args) == 6 else None)
     xs = [_array(v, n, np.float32).reshape(-1) for v, n in ((x, "x"), (z, "z"), (rc, "RC"))]
     if not (np.shape(x) == np.shape(z) == np.shape(rc)):
         raise ValueError(f"x, z, RC: must have the same shape, got {np.shape(x)}, {np.shape(z)}, {np.shape(rc)}")
+    ys = None
+    if y is not None and np.size(y):
+        if np.shape(y) != np.shape(x):
+            raise ValueError(f"y: must have the shape of x, got {np.shape(y)}, {np.shape(x)}")
+        ys = _array(y, "y", np.float32).reshape(-1)
     p = canonical(param)
     n = number(p, "Nelements", required=True, lo=1, integer=True)
     d = _delays(delays, n)
     pj = probe_json(p, delays=d)
-    rf, fs, t0 = _native.simus(xs[0], xs[1], xs[2], dumps(pj), dumps(_options_json(options)))
+    rf, fs, t0 = _native.simus(xs[0], xs[1], xs[2], dumps(pj), dumps(_options_json(options)), ys)
     rf = rf.T
     if t0 > 0:
         lead = int(round(t0 * fs))
