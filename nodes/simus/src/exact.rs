@@ -34,9 +34,7 @@ pub(crate) struct ElevationBlock {
     pub mgbm_bins: Vec<usize>,
 }
 
-/// Adds block `blk` into `u` (`[bin - bins.start][re, im][e_pad]`) for the band bins `bins`;
-/// with `elev`, each element's pattern is multiplied by the scatterer's MGBM factor.
-#[allow(clippy::too_many_arguments)]
+/// Adds block `blk` into `u` (`[bin - bins.start][re, im][e_pad]`) for the band bins `bins`.
 pub(crate) fn accumulate_exact(
     geom: &ArrayGeom,
     blk: &BlockGeom,
@@ -45,32 +43,11 @@ pub(crate) fn accumulate_exact(
     bins: Range<usize>,
     u: &mut [f64],
     rbuf: &mut Vec<f64>,
-    elev: Option<&ElevationBlock>,
 ) {
     let ep = geom.e_pad;
     rbuf.resize(2 * ep, 0.0);
-    let mut g: Vec<num_complex::Complex<f64>> = Vec::new();
-    let mut g_bin = usize::MAX;
     for (kl, k) in bins.enumerate() {
         let f = freqs[k];
-        if let Some(el) = elev {
-            let at = el.mgbm_bins.iter().copied().filter(|b| *b <= k).max().unwrap_or(0);
-            if at != g_bin {
-                g_bin = at;
-                let kw = 2.0 * std::f64::consts::PI * freqs[at] / el.c;
-                g.clear();
-                for s in 0..blk.n_s {
-                    for e in 0..ep {
-                        let rm = el.rm[s * ep + e];
-                        g.push(if rm > 0.0 {
-                            crate::pressure::mgbm(kw, el.y[s], rm, el.h, el.rf, el.planar)
-                        } else {
-                            num_complex::Complex::new(0.0, 0.0)
-                        });
-                    }
-                }
-            }
-        }
         let (d_re, d_im) = (&tab.d_re[k * ep..(k + 1) * ep], &tab.d_im[k * ep..(k + 1) * ep]);
         for s in 0..blk.n_s {
             let rc = blk.rc[s];
@@ -97,12 +74,118 @@ pub(crate) fn accumulate_exact(
                     }
                 }
             }
-            if elev.is_some() {
-                for e in 0..ep {
-                    let v = g[s * ep + e] * num_complex::Complex::new(r_re[e], r_im[e]);
-                    (r_re[e], r_im[e]) = (v.re, v.im);
+            let (mut tr, mut ti) = (0.0, 0.0);
+            for e in 0..ep {
+                tr += d_re[e] * r_re[e] - d_im[e] * r_im[e];
+                ti += d_re[e] * r_im[e] + d_im[e] * r_re[e];
+            }
+            let (tr, ti) = (tr * rc, ti * rc);
+            let row = &mut u[kl * 2 * ep..(kl + 1) * 2 * ep];
+            let (u_re, u_im) = row.split_at_mut(ep);
+            for e in 0..ep {
+                u_re[e] += tr * r_re[e] - ti * r_im[e];
+                u_im[e] += tr * r_im[e] + ti * r_re[e];
+            }
+        }
+    }
+}
+
+/// [`accumulate_exact`] for a block off the imaging plane, the phasors stepped in f64 from an
+/// exact anchor at the first bin of `bins` (as PFIELD does; MUST steps them in complex64), each
+/// element's pattern carrying the scatterer's MGBM factor, swapped (× new/old) at the bins
+/// where MUST recomputes it. `buf` is scratch.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn accumulate_elevation(
+    geom: &ArrayGeom,
+    blk: &BlockGeom,
+    tab: &Tables64,
+    freqs: &[f64],
+    df: f64,
+    bins: Range<usize>,
+    u: &mut [f64],
+    buf: &mut Vec<f64>,
+    el: &ElevationBlock,
+) {
+    type C = num_complex::Complex<f64>;
+    let (ep, m, l_) = (geom.e_pad, geom.m, crate::kernel::L);
+    let per = ep * m;
+    let Some(b0) = bins.clone().next() else { return };
+    buf.resize(4 * per + 2 * ep, 0.0);
+    let (ph, rest) = buf.split_at_mut(2 * per);
+    let (ph_re, ph_im) = ph.split_at_mut(per);
+    let (st, r) = rest.split_at_mut(2 * per);
+    let (st_re, st_im) = st.split_at_mut(per);
+    let (r_re, r_im) = r.split_at_mut(ep);
+    let elem = |i: usize| (i / (m * l_)) * l_ + i % l_;
+    let factors = |s: usize, k: usize| -> Vec<C> {
+        let kw = 2.0 * std::f64::consts::PI * freqs[k] / el.c;
+        (0..ep)
+            .map(|e| {
+                let rm = el.rm[s * ep + e];
+                if rm > 0.0 {
+                    crate::pressure::mgbm(kw, el.y[s], rm, el.h, el.rf, el.planar)
+                } else {
+                    C::new(0.0, 0.0)
+                }
+            })
+            .collect()
+    };
+    for s in 0..blk.n_s {
+        let rc = blk.rc[s];
+        if rc == 0.0 {
+            continue;
+        }
+        let at = s * per;
+        let first = el.mgbm_bins.iter().copied().filter(|b| *b <= b0).max().unwrap_or(0);
+        let mut g = factors(s, first);
+        for i in 0..per {
+            let (pr, pi) = geom.phasor(blk.amp[at + i], blk.r[at + i], freqs[b0]);
+            let v = g[elem(i)] * C::new(pr, pi);
+            (ph_re[i], ph_im[i]) = (v.re, v.im);
+            (st_re[i], st_im[i]) = geom.phasor(1.0, blk.r[at + i], df);
+        }
+        for (kl, k) in bins.clone().enumerate() {
+            if kl > 0 {
+                for i in 0..per {
+                    let (a, b) = (ph_re[i], ph_im[i]);
+                    ph_re[i] = a * st_re[i] - b * st_im[i];
+                    ph_im[i] = a * st_im[i] + b * st_re[i];
+                }
+                if el.mgbm_bins.contains(&k) {
+                    let g_new = factors(s, k);
+                    for i in 0..per {
+                        let e = elem(i);
+                        let ratio = if g[e].norm_sqr() > 0.0 { g_new[e] / g[e] } else { C::new(0.0, 0.0) };
+                        let v = ratio * C::new(ph_re[i], ph_im[i]);
+                        (ph_re[i], ph_im[i]) = (v.re, v.im);
+                    }
+                    g = g_new;
                 }
             }
+            let f = freqs[k];
+            r_re.fill(0.0);
+            r_im.fill(0.0);
+            // Σ over the sub-elements, lane by lane (contiguous: vectorises)
+            for c in 0..ep / l_ {
+                let (rr, ri) = (&mut r_re[c * l_..(c + 1) * l_], &mut r_im[c * l_..(c + 1) * l_]);
+                for mm in 0..m {
+                    let base = (c * m + mm) * l_;
+                    let (pr, pi) = (&ph_re[base..base + l_], &ph_im[base..base + l_]);
+                    if geom.ffd {
+                        for l in 0..l_ {
+                            let d = sinc_eps(blk.dirb[at + base + l] * f);
+                            rr[l] += d * pr[l];
+                            ri[l] += d * pi[l];
+                        }
+                    } else {
+                        for l in 0..l_ {
+                            rr[l] += pr[l];
+                            ri[l] += pi[l];
+                        }
+                    }
+                }
+            }
+            let (d_re, d_im) = (&tab.d_re[k * ep..(k + 1) * ep], &tab.d_im[k * ep..(k + 1) * ep]);
             let (mut tr, mut ti) = (0.0, 0.0);
             for e in 0..ep {
                 tr += d_re[e] * r_re[e] - d_im[e] * r_im[e];

@@ -170,12 +170,22 @@ pub(crate) fn mgbm(kw: f64, y: f64, rm: f64, h: f64, rf: f64, planar: bool) -> C
         let (a, b) = (C64::new(MGBM_A[n].0, MGBM_A[n].1), C64::new(MGBM_B[n].0, MGBM_B[n].1));
         let t = (kw * alpha + b / (h * h)).inv();
         g += if planar {
-            a * (std::f64::consts::PI * t).sqrt()
+            a * csqrt(std::f64::consts::PI * t)
         } else {
-            a * (std::f64::consts::PI * t).sqrt() * (kw * kw * beta2 / 4.0 * t + kw * gamma).exp()
+            a * csqrt(std::f64::consts::PI * t) * (kw * kw * beta2 / 4.0 * t + kw * gamma).exp()
         };
     }
     g
+}
+
+/// Principal complex square root by the algebraic formula (no polar form: several times faster
+/// than `Complex::sqrt`, the same branch cut as numpy's).
+#[inline]
+fn csqrt(z: C64) -> C64 {
+    let m = (z.re * z.re + z.im * z.im).sqrt();
+    let re = (0.5 * (m + z.re)).max(0.0).sqrt();
+    let im = (0.5 * (m - z.re)).max(0.0).sqrt();
+    C64::new(re, if z.im < 0.0 { -im } else { im })
 }
 
 fn pfield_impl(
@@ -350,29 +360,38 @@ fn pfield_impl(
                 let tables = Tables { bins: &bins, db, ffd: geom.ffd };
                 let sum = match (y, elev) {
                     (Some(y), Some((h, rf))) => {
+                        // Per MGBM segment (the factor held constant, as MUST): the phasors,
+                        // stepped across the whole band as in the 2-D field, carry each element's
+                        // factor, swapped at the segment's first bin (× new/old factor).
                         let rm = &r_mean[p * geom.n_el..(p + 1) * geom.n_el];
                         let yp = f64::from(y[p] as f32);
-                        let mut g = vec![C64::new(0.0, 0.0); geom.n_el];
+                        let mut g_old = vec![C64::new(1.0, 0.0); geom.n_el];
                         let mut sum = 0.0;
-                        for (kb, (f, spec)) in bins.iter().enumerate() {
-                            if kb > 0 {
+                        for (j, &start) in mgbm_bins.iter().enumerate() {
+                            let end = mgbm_bins.get(j + 1).copied().unwrap_or(bins.len());
+                            if start >= end {
+                                continue;
+                            }
+                            if start > 0 {
                                 step(ph_re, ph_im, st_re, st_im);
                             }
-                            if mgbm_bins.contains(&kb) {
-                                let kw = 2.0 * std::f64::consts::PI * f / c;
-                                for (e, ge) in g.iter_mut().enumerate() {
-                                    *ge = mgbm(kw, yp, rm[e], h, rf, planar);
-                                }
-                            }
-                            let mut acc = C64::new(0.0, 0.0);
+                            let kw = 2.0 * std::f64::consts::PI * bins[start].0 / c;
+                            let ratio: Vec<C64> = (0..geom.n_el)
+                                .map(|e| {
+                                    let g = mgbm(kw, yp, rm[e], h, rf, planar);
+                                    let r = if g_old[e].norm_sqr() > 0.0 { g / g_old[e] } else { C64::new(0.0, 0.0) };
+                                    g_old[e] = g;
+                                    r
+                                })
+                                .collect();
                             for i in 0..per {
-                                if e_of[i] == usize::MAX {
-                                    continue;
+                                if e_of[i] != usize::MAX {
+                                    let v = ratio[e_of[i]] * C64::new(ph_re[i], ph_im[i]);
+                                    (ph_re[i], ph_im[i]) = (v.re, v.im);
                                 }
-                                let dir = if geom.ffd { sinc_eps(db[i] * f) } else { 1.0 };
-                                acc += g[e_of[i]] * C64::new(dir * ph_re[i], dir * ph_im[i]);
                             }
-                            sum += spec * spec * acc.norm_sqr();
+                            let seg = Tables { bins: &bins[start..end], db, ffd: geom.ffd };
+                            sum += band_power(&seg, ph_re, ph_im, st_re, st_im);
                         }
                         sum
                     }

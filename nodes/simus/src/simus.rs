@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner};
 
 use crate::error::{Result, SimusError};
-use crate::exact::{accumulate_exact, ElevationBlock, Tables64};
+use crate::exact::{accumulate_elevation, accumulate_exact, ElevationBlock, Tables64};
 use crate::grid::{FrequencyPlan, PlanInputs};
 use crate::kernel::simd::Simd;
 use crate::kernel::{Scratch, Tables, G, L, TX_COMPLEX, TX_REAL, TX_UNIT, V};
@@ -216,8 +216,9 @@ impl Simus {
     /// factor, and each element's pattern times the multi-Gaussian beam (MGBM) of an element of
     /// `probe.height` focused at `probe.focus` in elevation (∞ when unset), on transmit and on
     /// receive, recomputed at MUST's `max(3, round(n/20))` band frequencies. The plan is the 2-D
-    /// one (MUST's SIMUS too ignores y there). Evaluated with the exact f64 kernel whatever
-    /// `accuracy` says (slower than the fast kernel: every phasor computed directly).
+    /// one (MUST's SIMUS too ignores y there). Evaluated in f64 whatever `accuracy` says: the
+    /// phasors anchored exactly at the start of each range of bins and stepped across it (slower
+    /// than the 2-D fast kernel, which steps them in f32 SIMD).
     pub fn simulate_3d<'a>(
         &mut self,
         scatterers: impl Into<ScattererSlices<'a>>,
@@ -393,8 +394,20 @@ impl Simus {
             let (blk, tab, tab64) = (&ws.blk, &ws.tab, &ws.tab64);
             let ebr = eb.as_ref();
             ws.tasks.par_iter_mut().for_each(|t| {
-                if exact {
-                    accumulate_exact(geom, blk, tab64, &tab.freqs, t.bins.clone(), &mut t.u, &mut t.rbuf, ebr);
+                if let Some(el) = ebr {
+                    accumulate_elevation(
+                        geom,
+                        blk,
+                        tab64,
+                        &tab.freqs,
+                        plan.df,
+                        t.bins.clone(),
+                        &mut t.u,
+                        &mut t.rbuf,
+                        el,
+                    );
+                } else if exact {
+                    accumulate_exact(geom, blk, tab64, &tab.freqs, t.bins.clone(), &mut t.u, &mut t.rbuf);
                 } else {
                     simd.accumulate(geom, blk, tab, t.bins.clone(), &mut t.sc);
                     fold(&mut t.sc, &mut t.u, geom.e_pad);

@@ -234,11 +234,13 @@ fn simulate_3d_in_the_plane_is_simulate_and_is_symmetric_in_y() {
     let down = sim.simulate_3d(&scat, &[-1e-3, 0.5e-3, -2e-3], &tx).unwrap();
     assert_eq!(up.data, down.data);
     assert_eq!(up.n_samples, flat.n_samples, "the plan is the 2-D one");
-    // the elevation model forces the exact kernel: the Exact option gives the same bits
+    // the elevation model is evaluated in f64 whatever the accuracy option: Exact (shorter
+    // ranges of bins between exact anchors) agrees to f32 rounding
     let mut exact =
         Simus::new(probe.clone(), medium.clone(), SimusOptions { accuracy: Accuracy::Exact, ..Default::default() })
             .unwrap();
-    assert_eq!(exact.simulate_3d(&scat, &[1e-3, -0.5e-3, 2e-3], &tx).unwrap().data, up.data);
+    let e = exact.simulate_3d(&scat, &[1e-3, -0.5e-3, 2e-3], &tx).unwrap();
+    assert!(nrms(&e.data, &up.data) < 1e-6, "{}", nrms(&e.data, &up.data));
     let err = |r: Result<RfFrame>| r.unwrap_err().to_string();
     assert!(err(sim.simulate_3d(&scat, &[0.0; 2], &tx)).contains("scatterers.y"));
     assert!(err(sim.simulate_3d(&scat, &[f32::NAN; 3], &tx)).contains("scatterers.y"));
