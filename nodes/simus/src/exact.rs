@@ -14,6 +14,25 @@ pub(crate) struct Tables64 {
     pub d_im: Vec<f64>,
 }
 
+/// One scatterer's echo at one bin into the spectra row `row` (`[re, im][e_pad]`):
+/// `T = rc Σ_e D_e R_e` (transmit), then `U_e += T R_e` (receive, by reciprocity).
+#[inline(always)]
+fn add_echo(d: (&[f64], &[f64]), r: (&[f64], &[f64]), rc: f64, row: &mut [f64]) {
+    let ((d_re, d_im), (r_re, r_im)) = (d, r);
+    let ep = r_re.len();
+    let (mut tr, mut ti) = (0.0, 0.0);
+    for e in 0..ep {
+        tr += d_re[e] * r_re[e] - d_im[e] * r_im[e];
+        ti += d_re[e] * r_im[e] + d_im[e] * r_re[e];
+    }
+    let (tr, ti) = (tr * rc, ti * rc);
+    let (u_re, u_im) = row.split_at_mut(ep);
+    for e in 0..ep {
+        u_re[e] += tr * r_re[e] - ti * r_im[e];
+        u_im[e] += tr * r_im[e] + ti * r_re[e];
+    }
+}
+
 /// MUST's elevation model for one block of scatterers off the imaging plane
 /// ([`crate::Simus::simulate_3d_into`]): each element's pattern times the MGBM factor of the
 /// scatterer, recomputed at the band bins `mgbm_bins` (MUST: `max(3, round(n/20))` of them) and
@@ -74,18 +93,7 @@ pub(crate) fn accumulate_exact(
                     }
                 }
             }
-            let (mut tr, mut ti) = (0.0, 0.0);
-            for e in 0..ep {
-                tr += d_re[e] * r_re[e] - d_im[e] * r_im[e];
-                ti += d_re[e] * r_im[e] + d_im[e] * r_re[e];
-            }
-            let (tr, ti) = (tr * rc, ti * rc);
-            let row = &mut u[kl * 2 * ep..(kl + 1) * 2 * ep];
-            let (u_re, u_im) = row.split_at_mut(ep);
-            for e in 0..ep {
-                u_re[e] += tr * r_re[e] - ti * r_im[e];
-                u_im[e] += tr * r_im[e] + ti * r_re[e];
-            }
+            add_echo((d_re, d_im), (&*r_re, &*r_im), rc, &mut u[kl * 2 * ep..(kl + 1) * 2 * ep]);
         }
     }
 }
@@ -186,18 +194,7 @@ pub(crate) fn accumulate_elevation(
                 }
             }
             let (d_re, d_im) = (&tab.d_re[k * ep..(k + 1) * ep], &tab.d_im[k * ep..(k + 1) * ep]);
-            let (mut tr, mut ti) = (0.0, 0.0);
-            for e in 0..ep {
-                tr += d_re[e] * r_re[e] - d_im[e] * r_im[e];
-                ti += d_re[e] * r_im[e] + d_im[e] * r_re[e];
-            }
-            let (tr, ti) = (tr * rc, ti * rc);
-            let row = &mut u[kl * 2 * ep..(kl + 1) * 2 * ep];
-            let (u_re, u_im) = row.split_at_mut(ep);
-            for e in 0..ep {
-                u_re[e] += tr * r_re[e] - ti * r_im[e];
-                u_im[e] += tr * r_im[e] + ti * r_re[e];
-            }
+            add_echo((d_re, d_im), (&*r_re, &*r_im), rc, &mut u[kl * 2 * ep..(kl + 1) * 2 * ep]);
         }
     }
 }
