@@ -44,13 +44,23 @@ pub enum SimusError {
         /// Comma-separated list of supported names.
         known: &'static str,
     },
-    /// The probe is convex (MUST's C5-2v): the 2-D linear model does not cover it.
-    #[error("convex arrays are not supported by the 2-D linear model (probe `{name}`, radius {radius} m)")]
+    /// A convex array where a stage does not support one yet (`name` says which).
+    #[error("convex arrays are not supported by {name} yet (radius {radius} m); the batch tools and the Python package simulate and beamform them")]
     ConvexNotSupported {
         /// Probe name.
         name: String,
         /// Radius of curvature (m).
         radius: f64,
+    },
+    /// The elements of a convex array do not fit on less than half of its circle.
+    #[error("invalid parameter `probe.n_elements` = {n_elements}: a convex array of radius {radius} m holds at most {max} elements at this pitch (the arc must span less than half the circle)")]
+    ArcTooShort {
+        /// The element count asked for.
+        n_elements: usize,
+        /// Radius of curvature (m).
+        radius: f64,
+        /// The largest count that fits.
+        max: usize,
     },
     /// The output slice given to `simulate_into` has the wrong length.
     #[error("output buffer has {got} samples, the plan needs n_elements × n_samples = {expected}")]

@@ -3,12 +3,16 @@
 //! element–scatterer–frequency, paper 1 eq. 16–17).
 //!
 //! Each element of width W is split into M sub-elements of width W/M (M = `ceil(W/λmin)`,
-//! `λmin = c/(fc(1 + bandwidth/200))`) at `x_e − W/2 + W/(2M) + m W/M`. For sub-element m of
-//! element e and a scatterer at (x, z):
+//! `λmin = c/(fc(1 + bandwidth/200))`) at offsets `t_m = −W/2 + W/(2M) + m W/M` along the element:
+//! `(x_e + t_m cos θ_e, z_e − t_m sin θ_e)` (θ_e, z_e = 0 on a linear array; a convex array's
+//! elements are tangent to its arc, [`crate::Probe::element_positions`]). For sub-element m of
+//! element e and a scatterer at (x, z), with `(dx, dz)` the vector from the sub-element:
 //!
-//! * `r = max(|(x, z) − (x_em, 0)|, λ/2)` (λ = c/fc): 2-D spreading `1/√r`, clamped near the face;
-//! * `sin θ = (dx + ε)/(d + ε)` (ε = 2^−23, MUST), obliquity `cos θ` (soft), 1 (rigid),
-//!   `cos θ/(cos θ + α)` (numeric baffle), replaced by 1.1921e-7 where |θ| = π/2;
+//! * `r = max(√(dx² + dz²), λ/2)` (λ = c/fc): 2-D spreading `1/√r`, clamped near the face;
+//! * angle from the element's normal `θ = asin((dx + ε)/(d + ε)) − θ_e` (ε = 2^−23, MUST),
+//!   obliquity `cos θ` (soft), 1 (rigid), `cos θ/(cos θ + α)` (numeric baffle), replaced by
+//!   1.1921e-7 where |θ| ≥ π/2; `sin θ` and `cos θ` by the angle-difference formulas (on a linear
+//!   array they are the plain ratio and its cosine, bit for bit);
 //! * directivity `sinc(k W/(2M) sin θ)` at k = k(fc) (MUST default) or at every frequency;
 //! * per path and frequency f: `exp(−α_Np(f) r + i 2π f r / c)`, `α_Np = att/8.69 · f[MHz] · 100` /m.
 //!
@@ -40,8 +44,17 @@ pub(crate) struct ArrayGeom {
     pub m: usize,
     /// Element centres, padded (padding at x = 0).
     pub xe: Vec<f64>,
-    /// Sub-element offsets from the element centre.
-    pub xi: Vec<f64>,
+    /// Element centre depths (0 on a linear array), padded.
+    pub ze: Vec<f64>,
+    /// cos and sin of each element's normal angle θ_e (1, 0 on a linear array), padded.
+    pub cos_e: Vec<f64>,
+    pub sin_e: Vec<f64>,
+    /// Convex array: radius R and apothem h (behind the face: `x² + (z + h)² ≤ R²`).
+    pub arc: Option<(f64, f64)>,
+    /// Sub-element offsets from the element centre, `[chunk][sub-element][lane]`: x
+    /// `t_m cos θ_e` and z `t_m sin(−θ_e)` (PyMUST's `xi`, `zi`).
+    pub sub_x: Vec<f64>,
+    pub sub_z: Vec<f64>,
     /// Element width (m).
     pub width: f64,
     /// r clamp λ/2 (m).
@@ -119,12 +132,30 @@ impl ArrayGeom {
         let seg = width / m as f64;
         let n_el = probe.n_elements;
         let e_pad = n_el.div_ceil(L) * L;
+        let pos = probe.element_positions();
+        let at = |e: usize, f: fn(&crate::probe::ElementPosition) -> f64, pad: f64| pos.get(e).map_or(pad, f);
+        let xi: Vec<f64> = (0..m).map(|i| -width / 2.0 + seg / 2.0 + i as f64 * seg).collect();
+        let (mut sub_x, mut sub_z) = (vec![0.0; e_pad * m], vec![0.0; e_pad * m]);
+        for c in 0..e_pad / L {
+            for (j, t) in xi.iter().enumerate() {
+                for l in 0..L {
+                    let th = at(c * L + l, |p| p.theta, 0.0);
+                    sub_x[(c * m + j) * L + l] = t * th.cos();
+                    sub_z[(c * m + j) * L + l] = t * (-th).sin();
+                }
+            }
+        }
         ArrayGeom {
             n_el,
             e_pad,
             m,
-            xe: (0..e_pad).map(|e| if e < n_el { probe.element_x(e) } else { 0.0 }).collect(),
-            xi: (0..m).map(|i| -width / 2.0 + seg / 2.0 + i as f64 * seg).collect(),
+            xe: (0..e_pad).map(|e| at(e, |p| p.x, 0.0)).collect(),
+            ze: (0..e_pad).map(|e| at(e, |p| p.z, 0.0)).collect(),
+            cos_e: (0..e_pad).map(|e| at(e, |p| p.theta.cos(), 1.0)).collect(),
+            sin_e: (0..e_pad).map(|e| at(e, |p| p.theta.sin(), 0.0)).collect(),
+            arc: probe.convex_radius().map(|r| (r, probe.apothem())),
+            sub_x,
+            sub_z,
             width,
             r_min: c / fc / 2.0,
             kc_half_seg: 2.0 * std::f64::consts::PI * fc / c * seg / 2.0,
@@ -152,25 +183,30 @@ impl ArrayGeom {
         let (ffd, kc, hs, r_min) = (self.ffd, self.kc_half_seg, self.half_seg_over_c, self.r_min);
         let nc = self.e_pad / L;
         for c in 0..nc {
+            let (xe, ze) = (&self.xe[c * L..(c + 1) * L], &self.ze[c * L..(c + 1) * L]);
+            let (ce, se) = (&self.cos_e[c * L..(c + 1) * L], &self.sin_e[c * L..(c + 1) * L]);
             for m in 0..self.m {
                 let base = (c * self.m + m) * L;
-                let xm = x - self.xi[m];
-                let xe = &self.xe[c * L..(c + 1) * L];
+                let (sx, sz) = (&self.sub_x[base..base + L], &self.sub_z[base..base + L]);
                 let (r, amp) = (&mut out.r[base..base + L], &mut out.amp[base..base + L]);
                 let mut sin_t = [0f64; L];
                 for l in 0..L {
-                    let dx = xm - xe[l];
-                    let d = (dx * dx + z * z).sqrt();
+                    let dx = (x - sx[l]) - xe[l];
+                    let dz = (z - sz[l]) - ze[l];
+                    let d = (dx * dx + dz * dz).sqrt();
                     let rr = d.max(r_min);
                     let s = ((dx + EPS32) / (d + EPS32)).clamp(-1.0, 1.0);
-                    let cos = ((1.0 - s) * (1.0 + s)).sqrt();
+                    let cs = ((1.0 - s) * (1.0 + s)).sqrt();
+                    // θ = asin(s) − θ_e; on a linear array (1, 0): exactly s and cs
+                    let sin = s * ce[l] - cs * se[l];
+                    let cos = cs * ce[l] + s * se[l];
                     let obli = (a1 * cos + a0) / (b1 * cos + b0);
-                    let obli = if s.abs() >= 1.0 { OBLI_FLOOR } else { obli };
-                    let dir = if ffd { 1.0 } else { sinc_eps(kc * s) };
+                    let obli = if cos <= 0.0 { OBLI_FLOOR } else { obli };
+                    let dir = if ffd { 1.0 } else { sinc_eps(kc * sin) };
                     let pad = if c * L + l < self.n_el { inv_m } else { 0.0 };
                     r[l] = rr;
                     amp[l] = obli * dir / rr.sqrt() * pad;
-                    sin_t[l] = s;
+                    sin_t[l] = sin;
                 }
                 if ffd {
                     for l in 0..L {
@@ -191,6 +227,28 @@ impl ArrayGeom {
                 }
             }
         }
+    }
+
+    /// MUST's `isOUT`: (x, z) behind the face of the array (z < 0, or inside the circle of a
+    /// convex array's arc), where the field is set to 0.
+    #[inline(always)]
+    pub fn is_behind(&self, x: f64, z: f64) -> bool {
+        z < 0.0 || self.arc.is_some_and(|(r, h)| x * x + (z + h) * (z + h) <= r * r)
+    }
+
+    /// Offset (x, z) of sub-element `m` of element `e` from the element's centre.
+    #[inline(always)]
+    pub fn sub_offset(&self, e: usize, m: usize) -> (f64, f64) {
+        let i = ((e / L) * self.m + m) * L + e % L;
+        (self.sub_x[i], self.sub_z[i])
+    }
+
+    /// Distance components `(dx, dz)` from sub-element `m` of element `e` to (x, z), in the
+    /// order of operations of [`Self::scatterer`].
+    #[inline(always)]
+    pub fn delta(&self, e: usize, m: usize, x: f64, z: f64) -> (f64, f64) {
+        let (sx, sz) = self.sub_offset(e, m);
+        ((x - sx) - self.xe[e], (z - sz) - self.ze[e])
     }
 
     /// Exact phasor `amp·exp((−β + 2πi/c) f r)` (without full-frequency directivity).

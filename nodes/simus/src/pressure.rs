@@ -201,9 +201,6 @@ fn pfield_impl(
     medium.validate()?;
     options.validate()?;
     transmit.validate(probe.n_elements)?;
-    if let Some(radius) = probe.radius.filter(|r| r.is_finite()) {
-        return Err(SimusError::ConvexNotSupported { name: "param".into(), radius });
-    }
     if x.len() != z.len() {
         return Err(SimusError::LengthMismatch { field: "pfield.z", got: z.len(), expected: x.len() });
     }
@@ -240,7 +237,7 @@ fn pfield_impl(
             geom.scatterer(x[p] as f32, z[p] as f32, 1.0, false, out);
             r.copy_from_slice(&blk.r);
             // not insonified behind the array (MUST: isOUT)
-            let on = if z[p] < 0.0 { 0.0 } else { 1.0 };
+            let on = if geom.is_behind(x[p], z[p]) { 0.0 } else { 1.0 };
             amp.iter_mut().zip(&blk.amp).for_each(|(a, b)| *a = on * b);
             if geom.ffd {
                 dirb.copy_from_slice(&blk.dirb);
@@ -266,8 +263,8 @@ fn pfield_impl(
                 for (e, rme) in rm.iter_mut().enumerate() {
                     for m in 0..geom.m {
                         let i = layout(e, m, geom.m);
-                        let dx = xp - geom.xi[m] - geom.xe[e];
-                        let r3 = (dx * dx + zp * zp + yp * yp).sqrt().max(geom.r_min);
+                        let (dx, dz) = geom.delta(e, m, xp, zp);
+                        let r3 = (dx * dx + dz * dz + yp * yp).sqrt().max(geom.r_min);
                         ap[i] *= rp[i].sqrt() / r3;
                         rp[i] = r3;
                         *rme += r3 / geom.m as f64;
@@ -604,8 +601,10 @@ mod tests {
         let bad = PfieldOptions { element_splitting: Some(0), ..Default::default() };
         assert!(err(pfield(&probe, &medium, &tx, &[0.0], &[0.01], &bad)).contains("options.ElementSplitting"));
         let mut convex = probe.clone();
-        convex.radius = Some(0.04);
-        assert!(err(pfield(&convex, &medium, &tx, &[0.0], &[0.01], &o)).contains("convex"));
+        convex.radius = Some(-0.04);
+        assert!(err(pfield(&convex, &medium, &tx, &[0.0], &[0.01], &o)).contains("probe.radius"));
+        convex.radius = Some(0.4e-3); // 8 × 0.3 mm do not fit on half a circle of 0.4 mm
+        assert!(err(pfield(&convex, &medium, &tx, &[0.0], &[0.01], &o)).contains("probe.n_elements"));
     }
 
     #[test]

@@ -1,7 +1,10 @@
-//! Uniform linear array (MUST `param` transducer fields) and MUST probe presets.
+//! Linear and convex arrays (MUST `param` transducer fields) and MUST probe presets.
 //!
-//! Element centres `x_e = (e − (N−1)/2)·pitch`, `z_e = 0` (MUST `getElementPositions`,
-//! pymust-notes §0): x lateral from the first (left) element to the last, z depth.
+//! Linear array: element centres `x_e = (e − (N−1)/2)·pitch`, `z_e = 0` (MUST
+//! `getElementPositions`, pymust-notes §0): x lateral from the first (left) element to the last,
+//! z depth. Convex array of radius R (MUST `param.radius`): the elements lie on an arc whose
+//! chord is the x axis (z = 0 at the chord, the arc bulges to z > 0 in the middle, centre of
+//! the circle at (0, −h)); see [`Probe::element_positions`].
 
 use serde::{Deserialize, Serialize};
 
@@ -94,8 +97,8 @@ pub struct Probe {
     /// (the paper uses 6).
     #[serde(default = "default_tx_now", alias = "TXnow", alias = "txnow")]
     pub tx_now: f64,
-    /// Radius of curvature (m). MUST `radius`; absent or infinite = linear array. A finite
-    /// radius (convex array) is rejected by [`Probe::validate`].
+    /// Radius of curvature (m). MUST `radius`; absent or infinite = linear array, finite and
+    /// > 0 = convex array (elements on the arc, [`Probe::element_positions`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius: Option<f64>,
     /// Elevation focus (m), MUST `focus`: used by [`crate::pfield_3d`] off the imaging plane,
@@ -116,7 +119,7 @@ impl Default for Probe {
 
 /// Names accepted by [`Probe::preset`] (case-insensitive).
 pub const PRESET_NAMES: &str =
-    "paper-5mhz, L11-5v, L12-3v, P4-2v, C5-2v (convex: rejected), PA4-2/20, L9-4/38, LA530, L14-5/38, L14-5W/60, P6-3";
+    "paper-5mhz, L11-5v, L12-3v, P4-2v, C5-2v (convex), PA4-2/20, L9-4/38, LA530, L14-5/38, L14-5W/60, P6-3";
 
 impl Probe {
     /// The probe of Shahriari & Garcia (2018), section 2.4: 5 MHz, 128 elements, pitch 0.30 mm,
@@ -152,7 +155,7 @@ impl Probe {
 
     /// MUST/PyMUST `getparam` presets (values of PyMUST 0.1.9 `getparam.py`; `TXnow` = 1, MUST's
     /// default, as getparam sets none) plus `paper-5mhz`. Elevation fields (`height`, `focus`)
-    /// are kept but unused. `C5-2v` is convex and returns [`SimusError::ConvexNotSupported`].
+    /// are used off the imaging plane only. `C5-2v` is convex (radius 49.57 mm).
     pub fn preset(name: &str) -> Result<Self> {
         let key = name.trim().to_ascii_uppercase();
         let mut p = match key.as_str() {
@@ -160,9 +163,7 @@ impl Probe {
             "L11-5V" => Self::linear(7.6e6, 0.3e-3, Some(0.27e-3), Some(0.03e-3), 128, 77.0, 1.0),
             "L12-3V" => Self::linear(7.54e6, 0.2e-3, Some(0.17e-3), Some(0.03e-3), 192, 93.0, 1.0),
             "P4-2V" => Self::linear(2.72e6, 0.3e-3, Some(0.25e-3), Some(0.05e-3), 64, 74.0, 1.0),
-            "C5-2V" => {
-                return Err(SimusError::ConvexNotSupported { name: name.to_string(), radius: 0.04957 });
-            }
+            "C5-2V" => Self::linear(3.57e6, 0.508e-3, Some(0.46e-3), Some(0.048e-3), 128, 79.0, 1.0),
             "PA4-2/20" => Self::linear(2.5e6, 0.3e-3, None, Some(0.05e-3), 64, 60.0, 1.0),
             "L9-4/38" => Self::linear(5e6, 0.3048e-3, None, Some(0.035e-3), 128, 65.0, 1.0),
             "LA530" => Self::linear(3e6, 0.215e-3 + 0.03e-3, Some(0.215e-3), Some(0.03e-3), 192, 75.0, 1.0),
@@ -175,6 +176,7 @@ impl Probe {
             "L11-5V" => (p.height, p.focus) = (Some(5e-3), Some(18e-3)),
             "L12-3V" => (p.height, p.focus) = (Some(5e-3), Some(20e-3)),
             "P4-2V" => (p.height, p.focus) = (Some(14e-3), Some(60e-3)),
+            "C5-2V" => (p.radius, p.height, p.focus) = (Some(0.04957), Some(13.5e-3), Some(60e-3)),
             "PA4-2/20" => p.height = Some(14e-3),
             "L9-4/38" => p.height = Some(6e-3),
             _ => {}
@@ -191,9 +193,67 @@ impl Probe {
         }
     }
 
-    /// Lateral position (m) of the centre of element `e`.
+    /// Lateral position (m) of the centre of element `e` (on a convex array: of its centre on
+    /// the arc, [`Probe::element_positions`]).
     pub fn element_x(&self, e: usize) -> f64 {
-        (e as f64 - (self.n_elements as f64 - 1.0) / 2.0) * self.pitch
+        match self.convex_radius() {
+            None => (e as f64 - (self.n_elements as f64 - 1.0) / 2.0) * self.pitch,
+            Some(_) => self.element_positions().get(e).map_or(f64::NAN, |p| p.x),
+        }
+    }
+
+    /// The radius of curvature of a convex array (`radius` finite), None for a linear one.
+    pub fn convex_radius(&self) -> Option<f64> {
+        self.radius.filter(|r| r.is_finite())
+    }
+
+    /// Centre and normal of every element: MUST `getElementPositions`. Linear array: `x_e` as
+    /// [`Probe::element_x`], `z_e = 0`, `θ_e = 0`. Convex array of radius R and N elements:
+    /// `chord = 2R·sin((N−1)·asin(pitch/2R))`, apothem `h = √(R² − chord²/4)`, normal angles
+    /// `θ_e = linspace(atan2(−chord/2, h), atan2(chord/2, h), N)` from the z axis (positive
+    /// towards +x), `x_e = R sin θ_e`, `z_e = R cos θ_e − h`.
+    pub fn element_positions(&self) -> Vec<ElementPosition> {
+        let n = self.n_elements;
+        match self.convex_radius() {
+            None => (0..n)
+                .map(|e| ElementPosition { x: (e as f64 - (n as f64 - 1.0) / 2.0) * self.pitch, z: 0.0, theta: 0.0 })
+                .collect(),
+            Some(r) => {
+                let (chord, h) = arc_chord_apothem(r, self.pitch, n);
+                let (a, b) = ((-chord / 2.0).atan2(h), (chord / 2.0).atan2(h));
+                (0..n)
+                    .map(|e| {
+                        // numpy linspace: start + e·step, the last point exactly `b`
+                        let t = if n == 1 {
+                            a
+                        } else if e == n - 1 {
+                            b
+                        } else {
+                            a + e as f64 * ((b - a) / (n - 1) as f64)
+                        };
+                        ElementPosition { x: r * t.sin(), z: r * t.cos() - h, theta: t }
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    /// Apothem h of a convex array (distance from the circle's centre to the chord; the centre
+    /// is at (0, −h)); 0 for a linear array.
+    pub fn apothem(&self) -> f64 {
+        self.convex_radius().map_or(0.0, |r| arc_chord_apothem(r, self.pitch, self.n_elements).1)
+    }
+
+    /// True when (x, z) lies behind the face of the array (MUST's `isOUT`): z < 0, or for a
+    /// convex array inside or on the circle of the arc, `x² + (z + h)² ≤ R²`.
+    pub fn is_behind(&self, x: f64, z: f64) -> bool {
+        match self.convex_radius() {
+            None => z < 0.0,
+            Some(r) => {
+                let h = self.apothem();
+                z < 0.0 || x * x + (z + h) * (z + h) <= r * r
+            }
+        }
     }
 
     /// Checks every field; the error names the field and the allowed range.
@@ -241,9 +301,33 @@ impl Probe {
                 return Err(invalid("probe.radius", r, "> 0 (infinite = linear array)"));
             }
             if r.is_finite() {
-                return Err(SimusError::ConvexNotSupported { name: "custom".into(), radius: r });
+                if self.pitch > 2.0 * r {
+                    return Err(invalid("probe.pitch", self.pitch, "<= 2·radius on a convex array"));
+                }
+                let half_angle = (self.pitch / 2.0 / r).asin();
+                if (self.n_elements as f64 - 1.0) * half_angle >= std::f64::consts::FRAC_PI_2 {
+                    let max = (std::f64::consts::FRAC_PI_2 / half_angle).ceil() as usize;
+                    return Err(SimusError::ArcTooShort { n_elements: self.n_elements, radius: r, max });
+                }
             }
         }
         Ok(())
     }
+}
+
+/// Centre and normal of one element (MUST `getElementPositions`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElementPosition {
+    /// Lateral position (m).
+    pub x: f64,
+    /// Depth (m); 0 on a linear array.
+    pub z: f64,
+    /// Angle of the element's normal from the z axis (rad, positive towards +x).
+    pub theta: f64,
+}
+
+/// Chord and apothem of the arc of N elements at `pitch` on a circle of radius `r` (MUST).
+fn arc_chord_apothem(r: f64, pitch: f64, n: usize) -> (f64, f64) {
+    let chord = 2.0 * r * ((pitch / 2.0 / r).asin() * (n as f64 - 1.0)).sin();
+    (chord, (r * r - chord * chord / 4.0).sqrt())
 }

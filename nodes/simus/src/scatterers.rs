@@ -119,4 +119,23 @@ impl<'a> ScattererSlices<'a> {
         }
         d2max.sqrt()
     }
+
+    /// Largest distance (m) from any scatterer to any element centre of `probe` (MUST's `maxD`
+    /// before the pulse length): [`Self::max_element_distance`] for a linear array, every
+    /// element for a convex one.
+    pub fn max_probe_distance(&self, probe: &crate::Probe) -> f64 {
+        let n = probe.n_elements;
+        if probe.convex_radius().is_none() {
+            return self.max_element_distance(probe.element_x(0), probe.element_x(n - 1));
+        }
+        let pos = probe.element_positions();
+        let mut d2max = 0.0f64;
+        for (x, z) in self.x.iter().zip(self.z) {
+            let (x, z) = (f64::from(*x), f64::from(*z));
+            for p in &pos {
+                d2max = d2max.max((x - p.x) * (x - p.x) + (z - p.z) * (z - p.z));
+            }
+        }
+        d2max.sqrt()
+    }
 }

@@ -169,8 +169,7 @@ impl Simus {
                 let s = scatterers.into();
                 s.validate()?;
                 transmit.validate(self.probe.n_elements)?;
-                let n = self.probe.n_elements;
-                let d = s.max_element_distance(self.probe.element_x(0), self.probe.element_x(n - 1));
+                let d = s.max_probe_distance(&self.probe);
                 FrequencyPlan::for_max_distance(&self.plan_inputs, d, transmit.max_delay())
             }
             PlanMode::MaxDistance { max_distance, max_delay } => self.plan_for_max_distance(max_distance, max_delay),
@@ -277,7 +276,7 @@ impl Simus {
             return Err(SimusError::OutputLength { got: out.len(), expected: n_el * plan.n_samples });
         }
         if self.options.frequency_step <= 1.0 {
-            let d = s.max_element_distance(self.probe.element_x(0), self.probe.element_x(n_el - 1));
+            let d = s.max_probe_distance(&self.probe);
             let needed =
                 2.0 * (d + self.plan_inputs.pulse_duration * self.medium.c) / self.medium.c + transmit.max_delay();
             if needed > plan.window() * (1.0 + 1e-12) {
@@ -505,8 +504,8 @@ fn elevate_block(
                     if e >= geom.n_el {
                         continue;
                     }
-                    let dx = xp - geom.xi[m] - geom.xe[e];
-                    let r3 = (dx * dx + zp * zp + yp * yp).sqrt().max(geom.r_min);
+                    let (dx, dz) = geom.delta(e, m, xp, zp);
+                    let r3 = (dx * dx + dz * dz + yp * yp).sqrt().max(geom.r_min);
                     blk.amp[base + l] *= blk.r[base + l].sqrt() / r3;
                     blk.r[base + l] = r3;
                     eb.rm[i * ep + e] += r3 / geom.m as f64;
@@ -529,7 +528,7 @@ fn setup_block(
     let stride = geom.m * geom.e_pad;
     let (x, z, rc) = (&s.x[range.clone()], &s.z[range.clone()], &s.rc[range]);
     for (i, v) in blk.rc.iter_mut().enumerate() {
-        *v = if i >= n || z[i] < 0.0 { 0.0 } else { f64::from(rc[i]) };
+        *v = if i >= n || geom.is_behind(f64::from(x[i]), f64::from(z[i])) { 0.0 } else { f64::from(rc[i]) };
     }
     let one = |i: usize, out: ScattererGeom<'_>| {
         if i < n {

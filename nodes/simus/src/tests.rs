@@ -131,9 +131,9 @@ fn presets_match_pymust_getparam() {
     for name in ["PA4-2/20", "L9-4/38", "LA530", "L14-5/38", "L14-5W/60", "P6-3"] {
         Probe::preset(name).unwrap().validate().unwrap();
     }
-    let e = Probe::preset("C5-2v").unwrap_err();
-    assert!(matches!(e, SimusError::ConvexNotSupported { .. }));
-    assert!(e.to_string().contains("convex arrays are not supported by the 2-D linear model"), "{e}");
+    let c5 = Probe::preset("C5-2v").unwrap();
+    assert_eq!((c5.fc, c5.pitch, c5.n_elements, c5.bandwidth, c5.radius), (3.57e6, 5.08e-4, 128, 79.0, Some(0.04957)));
+    assert!((c5.element_width() - 4.6e-4).abs() < 1e-12);
     assert!(matches!(Probe::preset("X1").unwrap_err(), SimusError::UnknownProbe { .. }));
 }
 

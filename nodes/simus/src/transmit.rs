@@ -54,25 +54,48 @@ impl Transmit {
     }
 
     /// Plane wave tilted by `tilt` (rad, |tilt| < π/2): `delay_e = x_e sin(tilt)/c − min`.
-    /// A positive tilt fires elements at larger x later: the wave travels towards +x.
+    /// A positive tilt fires elements at larger x later: the wave travels towards +x. On a
+    /// convex array (MUST `txdelay`): each element fires so that the wavefront is the line
+    /// tangent to the arc at the angle `tilt`, `delay_e = −dist(e, tangent)/c − min`.
     pub fn plane_wave(probe: &Probe, c: f64, tilt: f64) -> Result<Self> {
         if !(tilt.is_finite() && tilt.abs() < std::f64::consts::FRAC_PI_2) {
             return Err(invalid("tilt", tilt, "finite with |tilt| < pi/2 (rad)"));
         }
-        let d = (0..probe.n_elements).map(|e| probe.element_x(e) * tilt.sin() / c).collect();
+        let Some(r) = probe.convex_radius() else {
+            let d = (0..probe.n_elements).map(|e| probe.element_x(e) * tilt.sin() / c).collect();
+            return Ok(Self::from_raw(d));
+        };
+        let h = probe.apothem();
+        // the tangent point (xn, zn) and MUST's distance from each element to the tangent
+        let (xn, zn) = (r * tilt.sin(), r * tilt.cos() - h);
+        let s = xn / (zn + h);
+        let d = probe
+            .element_positions()
+            .iter()
+            .map(|p| -(p.z + s * p.x - xn * xn / (zn + h) - zn).abs() / (1.0 + s * s).sqrt() / c)
+            .collect();
         Ok(Self::from_raw(d))
     }
 
     /// Wave focused at `(x0, z0)`, `z0 > 0`: `delay_e = −|e − focus|/c − min` (outer elements first).
+    /// On a convex array the focus must lie in front of the arc.
     pub fn focused(probe: &Probe, c: f64, x0: f64, z0: f64) -> Result<Self> {
         if !(x0.is_finite() && z0.is_finite() && z0 > 0.0) {
             return Err(invalid("focus z0", z0, "finite and > 0 (m); use diverging() for z0 < 0"));
+        }
+        if probe.convex_radius().is_some() && probe.is_behind(x0, z0) {
+            return Err(invalid(
+                "focus z0",
+                format!("{z0} at x0 = {x0}"),
+                "in front of the convex array's face (outside the circle of its arc)",
+            ));
         }
         Ok(Self::point(probe, c, x0, z0))
     }
 
     /// Diverging wave from the virtual source `(x0, z0)` behind the array, `z0 < 0`:
-    /// `delay_e = |e − source|/c − min`.
+    /// `delay_e = |e − source|/c − min`. On a convex array, the centre of its circle
+    /// `(0, −h)` gives all delays 0 (the arc's own diverging wave).
     pub fn diverging(probe: &Probe, c: f64, x0: f64, z0: f64) -> Result<Self> {
         if !(x0.is_finite() && z0.is_finite() && z0 < 0.0) {
             return Err(invalid("virtual source z0", z0, "finite and < 0 (m); use focused() for z0 > 0"));
@@ -80,9 +103,11 @@ impl Transmit {
         Ok(Self::point(probe, c, x0, z0))
     }
 
-    /// MUST `txdelay(x0, z0, param)` for a linear array: `−sign(z0)·|e − (x0, z0)|/c − min`.
+    /// MUST `txdelay(x0, z0, param)`: `−sign(z0)·|e − (x0, z0)|/c − min` (elements at (x_e, z_e)).
+    /// MUST decides focused/diverging on a convex array by `hypot(x0, R − z0) < R`, which calls a
+    /// focus deeper than 2R diverging; here the sign of z0 decides, as on a linear array.
     fn point(probe: &Probe, c: f64, x0: f64, z0: f64) -> Self {
-        let d = (0..probe.n_elements).map(|e| -z0.signum() * (probe.element_x(e) - x0).hypot(z0) / c).collect();
+        let d = probe.element_positions().iter().map(|p| -z0.signum() * (p.x - x0).hypot(p.z - z0) / c).collect();
         Self::from_raw(d)
     }
 

@@ -118,9 +118,9 @@ def probe_json(p, name="param", delays=None):
             out[k2] = v
     if "width" not in out and "kerf" not in out:
         raise ValueError(f"{name}.width or {name}.kerf is missing (one is required)")
-    r = number(p, "radius", name, allow_inf=True)
+    r = number(p, "radius", name, allow_inf=True, lo=0, lo_open=True)
     if r is not None and not math.isinf(r):
-        raise ValueError(f"{name}.radius = {r}: convex arrays are not supported yet (radius must be inf)")
+        out["radius"] = r
     b = p.get("baffle")
     if b is not None:
         out["baffle"] = b.lower() if isinstance(b, str) else number(p, "baffle", name, lo=0, lo_open=True)

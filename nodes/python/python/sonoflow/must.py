@@ -75,7 +75,10 @@ def txdelay(*args):
     * ``txdelay(x0, z0, param)``: focused at (x0, z0) (z0 > 0) or diverging from a virtual
       source (z0 < 0).
 
-    Linear arrays only (``param.radius`` absent or inf)."""
+    Convex arrays (finite ``param.radius``) as MUST: a plane wave is the line tangent to the arc
+    at ``tilt``; the circular form is not available (MUST neither). Difference: MUST calls a
+    point focused on a convex array when ``hypot(x0, radius - z0) < radius``, so a focus deeper
+    than twice the radius becomes diverging; here z0 > 0 is focused, z0 < 0 diverging."""
     if len(args) == 2:
         param, form = args[0], "plane"
     elif len(args) == 3 and hasattr(args[2], "keys"):
@@ -104,6 +107,8 @@ def txdelay(*args):
                 raise ValueError(f"(x0, z0) = ({a}, {b}): must be finite with z0 != 0")
             rows.append(_native.txdelay(js, "focused" if b > 0 else "diverging", float(a), float(b)))
     else:
+        if "radius" in pj:
+            raise ValueError("txdelay(param, tilt, width) is not available for a convex array (param.radius finite)")
         tilt = np.atleast_1d(np.asarray(args[1], dtype=np.float64)).reshape(-1)
         width = np.atleast_1d(np.asarray(args[2], dtype=np.float64)).reshape(-1)
         if tilt.shape != width.shape:
