@@ -1,7 +1,7 @@
 //! Delay-and-sum of I/Q onto a rectangular grid, with receive sub-aperture steering
 //! (MUST/PyMUST `dasmtx`, pymust-notes §7; Shahriari & Garcia 2018 §2.4; Madiena et al. 2018).
 //!
-//! For pixel p = (x, z) and element e at (x_e, 0):
+//! For pixel p = (x, z) and element e at (x_e, z_e) (z_e = 0 on a linear array):
 //!
 //! * round-trip delay `τ = (d_TX(p) + |p − e|)/c`, fractional sample `i = (τ − t0)·fs`;
 //! * receive aperture (`fnumber` F > 0, receive angle θ): element e is used iff
@@ -9,6 +9,11 @@
 //!   angle θ from the z axis meets the array (θ > 0 centres it at smaller x: the receive beam runs
 //!   from the aperture down towards +x), and its width keeps the f-number F along that line. F = 0 (MUST's default) uses every element (θ must then be 0).
 //!   Rectangular weights, plain sum (MUST: no normalisation by the number of elements);
+//! * convex array (`radius` R finite, [`crate::convex`]): elements on an arc whose chord lies on
+//!   z = 0 (MUST `getElementPositions`), element normals at θ_e from the z axis; element e is used
+//!   iff `|φ_e − θ_e − θ| ≤ atan(1/(2F))`, φ_e = atan2(x − x_e, z − z_e) the direction from e
+//!   to p (PyMUST: `asin(dx/d)`, θ = 0); Hann weights by `u = −(φ_e − θ_e − θ)/(2·atan(1/(2F)))`;
+//!   pixels behind the face (inside the arc's circle) are an error;
 //! * linear interpolation on samples `⌊i⌋, ⌊i⌋+1` (valid for `0 ≤ i ≤ n_samples − 2`), or nearest;
 //! * I/Q phase rotation: each weight is multiplied by `exp(i·2π fc·τ)` (the demodulated signal is
 //!   re-modulated at its delay), so the beamformed value is the analytic RF signal at p.
@@ -26,6 +31,9 @@
 //! * arbitrary delays ([`TxWave::Delays`], NaN = element off): PyMUST's rule literally, minimum
 //!   over 4·n_tx points linearly interpolated along the transmitting elements (PyMUST: cubic
 //!   spline for the delays; identical for linear delay laws).
+//! * convex array: a focused wave by the virtual-source model above, every other wave by its
+//!   MUST delays ([`TxWave::delays`]) and PyMUST's rule, the minimum over 4·n_tx points whose
+//!   positions (x, z) and delays follow the cubic spline through the transmitting elements.
 //!
 //! The set-up (delays, aperture, weights, phase factors) is done once into a [`DasPlan`]: a
 //! per-pixel list of taps (sample index, two complex weights) in CSR form, applied to each frame
@@ -42,6 +50,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::convex::{self, Convex};
 use crate::error::{check_len, invalid, positive, BeamformError, Result};
 use crate::grid::Grid;
 use crate::C32;
@@ -101,11 +110,18 @@ pub struct DasParams {
     /// Time of sample 0 (s), finite, default 0. MUST `t0`.
     #[serde(default)]
     pub t0: f64,
-    /// Element pitch (m), > 0. MUST `pitch`. Elements at `x_e = (e − (N−1)/2)·pitch`, z = 0.
+    /// Element pitch (m), > 0. MUST `pitch`. Linear array: elements at `x_e = (e − (N−1)/2)·pitch`,
+    /// z = 0; convex array: one pitch apart along the arc ([`DasParams::element_positions`]).
     pub pitch: f64,
-    /// Number of elements in [1, 65536]. MUST `Nelements`.
+    /// Number of elements in [1, 65536] (on a convex array, few enough that the arc spans less
+    /// than half a circle). MUST `Nelements`.
     #[serde(alias = "Nelements", alias = "nelements")]
     pub n_elements: usize,
+    /// Radius of curvature of a convex array (m), > 0; None or +∞ = linear array (default).
+    /// MUST `radius`. The arc's chord lies on z = 0, centred on x = 0; its circle's centre is at
+    /// (0, −h), h the apothem ([`crate::convex`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
     /// Receive f-number, ≥ 0 and ≤ 1000; 0 = full aperture (MUST's default). MUST `fnumber`.
     #[serde(default)]
     pub fnumber: f64,
@@ -121,9 +137,30 @@ pub struct DasParams {
 }
 
 impl DasParams {
-    /// Lateral position of element `e` (m), as MUST: `(e − (N−1)/2)·pitch`.
+    /// Lateral position of element `e` (m), as MUST: `(e − (N−1)/2)·pitch` for a linear array,
+    /// `R sin θ_e` for a convex one (the x of [`DasParams::element_positions`]).
     pub fn element_x(&self, e: usize) -> f64 {
-        (e as f64 - (self.n_elements as f64 - 1.0) / 2.0) * self.pitch
+        match self.convex_radius() {
+            None => (e as f64 - (self.n_elements as f64 - 1.0) / 2.0) * self.pitch,
+            Some(r) => convex::convex_element(self.pitch, self.n_elements, r, e).0,
+        }
+    }
+
+    /// The radius of a convex array (`radius` finite), None for a linear one.
+    pub fn convex_radius(&self) -> Option<f64> {
+        self.radius.filter(|r| r.is_finite())
+    }
+
+    /// `(x_e, z_e, θ_e)` of every element (m, m, rad): MUST `getElementPositions`. Linear array:
+    /// x_e as [`DasParams::element_x`], z_e = 0, θ_e = 0; convex array:
+    /// [`convex::convex_element_positions`] (θ_e is the angle of element e's normal from the z
+    /// axis, positive towards +x).
+    pub fn element_positions(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let n = self.n_elements;
+        match self.convex_radius() {
+            None => ((0..n).map(|e| self.element_x(e)).collect(), vec![0.0; n], vec![0.0; n]),
+            Some(r) => convex::convex_element_positions(self.pitch, n, r),
+        }
     }
 
     /// Checks every field; the error names the field and the allowed range.
@@ -151,7 +188,7 @@ impl DasParams {
                 "> 0 when rx_angle != 0 (a steered sub-aperture needs a finite width)",
             ));
         }
-        Ok(())
+        convex::validate_radius(self)
     }
 }
 
@@ -247,11 +284,30 @@ impl TxWave {
             TxWave::Delays { .. } => 0.0,
         }
     }
+
+    /// The transmit delays (s) of this wave on the array of `params` ([`DasParams::element_positions`]),
+    /// minimum 0, as MUST `txdelay` (txdelay.py):
+    ///
+    /// * plane wave of tilt θ: linear array `x_e sin θ/c − min`; convex array `−d_e/c − min`, d_e
+    ///   the distance from element e to the line tangent to the arc's circle at angle θ
+    ///   (`xn = R sin θ, zn = R cos θ − h`, `d = |z_e + xn/(zn + h)·x_e − xn²/(zn + h) − zn| /
+    ///   √(1 + xn²/(zn + h)²)`);
+    /// * focused at f: `−|e − f|/c − min`; diverging from s: `|e − s|/c − min` (MUST picks the
+    ///   sign of a convex array's law by whether the point lies in the circle of radius R about
+    ///   (0, R); here the kind chooses it);
+    /// * `Delays`: as given (NaN = element off).
+    ///
+    /// Errors: invalid parameters or wave.
+    pub fn delays(&self, params: &DasParams) -> Result<Vec<f64>> {
+        params.validate()?;
+        self.validate(params.n_elements)?;
+        Ok(convex::tx_delays(params, self))
+    }
 }
 
 /// Second derivatives of the not-a-knot cubic spline through `y` at the integer knots 0..n−1
 /// (all zero, i.e. linear interpolation, when n < 4).
-fn spline_second_derivatives(y: &[f64]) -> Vec<f64> {
+pub(crate) fn spline_second_derivatives(y: &[f64]) -> Vec<f64> {
     let n = y.len();
     let mut m = vec![0.0; n];
     if n < 4 {
@@ -285,6 +341,13 @@ fn spline_second_derivatives(y: &[f64]) -> Vec<f64> {
     m[0] = 2.0 * m[1] - m[2];
     m[n - 1] = 2.0 * m[n - 2] - m[n - 3];
     m
+}
+
+/// The spline of [`spline_second_derivatives`] (second derivatives `m2`) between knots k and
+/// k + 1, at fraction u.
+#[inline]
+pub(crate) fn spline_at(y: &[f64], m2: &[f64], k: usize, u: f64) -> f64 {
+    (1.0 - u) * y[k] + u * y[k + 1] + (((1.0 - u).powi(3) - (1.0 - u)) * m2[k] + (u.powi(3) - u) * m2[k + 1]) / 6.0
 }
 
 /// `min_i (d_i + √((x_i − x)² + z²))` and the first index attaining it, as a plain scan would
@@ -376,19 +439,25 @@ fn sincos_fast(phi: f64) -> (f64, f64) {
 }
 
 /// Transmit distance and its gradient, per pixel.
-struct TxModel {
+pub(crate) struct TxModel {
     kind: TxKind,
 }
 
+/// How d_TX is evaluated: closed forms (linear arrays; focused waves on convex ones), PyMUST's
+/// transmit points on z = 0 (linear arrays) or off it (`PointsXz`, convex arrays).
 enum TxKind {
     Plane { sin: f64, cos: f64, tan: f64, xa: f64, xb: f64, xref: f64 },
     Diverging { x0: f64, z0: f64, xa: f64, xb: f64, m: f64 },
     Focused { x0: f64, z0: f64, m: f64 },
     Points { x: Vec<f64>, d: Vec<f64> },
+    PointsXz { x: Vec<f64>, z: Vec<f64>, d: Vec<f64> },
 }
 
 impl TxModel {
-    fn new(tx: &TxWave, p: &DasParams) -> Self {
+    pub(crate) fn new(tx: &TxWave, p: &DasParams) -> Self {
+        if p.convex_radius().is_some() {
+            return Self::convex(tx, p);
+        }
         let n = p.n_elements;
         let (xa, xb) = (p.element_x(0), p.element_x(n - 1));
         let kind = match tx {
@@ -436,9 +505,24 @@ impl TxModel {
         Self { kind }
     }
 
+    /// A convex array: a focused wave by its virtual source (`max_e |e − f|` over the elements on
+    /// the arc), every other wave by its delays ([`TxWave::delays`]) and PyMUST's rule, the
+    /// minimum over 4·n_tx points along the transmitting elements, positions and delays
+    /// interpolated by the not-a-knot cubic spline (scipy interp1d 'cubic', as PyMUST does for
+    /// xe, ze and the delays).
+    fn convex(tx: &TxWave, p: &DasParams) -> Self {
+        if let TxWave::Focused { x0, z0 } = tx {
+            let (xe, ze, _) = p.element_positions();
+            let m = xe.iter().zip(&ze).map(|(x, z)| (x - x0).hypot(z - z0)).fold(0.0, f64::max);
+            return Self { kind: TxKind::Focused { x0: *x0, z0: *z0, m } };
+        }
+        let (x, z, d) = convex::tx_points(p, tx);
+        Self { kind: TxKind::PointsXz { x, z, d } }
+    }
+
     /// `(d_TX, ∂d_TX/∂x, ∂d_TX/∂z)` at (x, z).
     #[inline(always)]
-    fn eval(&self, x: f64, z: f64) -> (f64, f64, f64) {
+    pub(crate) fn eval(&self, x: f64, z: f64) -> (f64, f64, f64) {
         let through = |xs: f64, base: f64| {
             let r = (x - xs).hypot(z);
             let (gx, gz) = if r > 0.0 { ((x - xs) / r, z / r) } else { (0.0, 1.0) };
@@ -475,6 +559,7 @@ impl TxModel {
                 }
             }
             TxKind::Points { x: xs, d } => Self::through_point(xs, points_min(xs, d, x, z), x, z),
+            TxKind::PointsXz { x: xs, z: zs, d } => convex::points_eval(xs, zs, d, x, z),
         }
     }
 
@@ -626,6 +711,8 @@ struct RowCtx<'a> {
     model: &'a TxModel,
     p: &'a DasParams,
     xe: &'a [f64],
+    /// Element depths, normals and aperture half-angle of a convex array (None: linear).
+    convex: Option<&'a Convex>,
     tan_rx: f64,
     cos_rx: f64,
     wc: f64,
@@ -692,12 +779,17 @@ impl RowCtx<'_> {
     /// The elements pixel (x, z) uses: all of them without an f-number, else those with
     /// |x − x_e − z·tan θ_RX| ≤ z / cos θ_RX / (2 F#), a contiguous range because the elements are
     /// sorted by x (pitch > 0); found by bisection on the same expression, so the same elements
-    /// as testing each one.
+    /// as testing each one. Convex array: [`convex::aperture`] (the half-width returned is then
+    /// the half-angle `atan(1/(2F))`).
     #[inline(always)]
     fn aperture(&self, x: f64, z: f64) -> (usize, usize, f64) {
         let (p, xe) = (self.p, self.xe);
         if p.fnumber <= 0.0 {
             return (0, xe.len(), 0.0);
+        }
+        if let Some(cv) = self.convex {
+            let (lo, hi) = convex::aperture(cv, x, z, p.rx_angle);
+            return (lo, hi, cv.alpha);
         }
         let half = z / self.cos_rx / 2.0 / p.fnumber;
         let off = |e: &f64| (x - e) - z * self.tan_rx;
@@ -735,27 +827,54 @@ impl RowCtx<'_> {
             let with_f = p.fnumber > 0.0;
             let inv_width = if with_f { 1.0 / (2.0 * half) } else { 0.0 };
             let Taps { geo, index, w0, w1, valid, sums } = &mut taps;
-            // geometry, apodisation and phase (f64, branch-free)
-            for (k, (g, &xk)) in geo[..m].iter_mut().zip(&xe[lo..hi]).enumerate() {
-                let dx = x - xk;
-                let d = (dx * dx + z * z).sqrt();
-                let tau = (dtx + d) * inv_c;
-                let u = if with_f {
-                    -(dx - z * self.tan_rx) * inv_width
-                } else if ne > 1 {
-                    (lo + k) as f64 * u_step - 0.5
-                } else {
-                    0.0
-                };
-                let aw = if hann {
-                    let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
-                    c * c
-                } else {
-                    1.0
-                };
-                let (s, c) = sincos_fast(wc * tau);
-                let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
-                *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, z * inv_d];
+            if let Some(cv) = self.convex {
+                // convex array: elements off z = 0, aperture position by angle from the normal
+                let rx = p.rx_angle;
+                for (k, g) in geo[..m].iter_mut().enumerate() {
+                    let e = lo + k;
+                    let (dx, dz) = (x - xe[e], z - cv.ze[e]);
+                    let d = (dx * dx + dz * dz).sqrt();
+                    let tau = (dtx + d) * inv_c;
+                    let u = if with_f {
+                        -(convex::direction(dx, dz) - cv.the[e] - rx) * inv_width
+                    } else if ne > 1 {
+                        e as f64 * u_step - 0.5
+                    } else {
+                        0.0
+                    };
+                    let aw = if hann {
+                        let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
+                        c * c
+                    } else {
+                        1.0
+                    };
+                    let (s, c) = sincos_fast(wc * tau);
+                    let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
+                    *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, dz * inv_d];
+                }
+            } else {
+                // geometry, apodisation and phase (f64, branch-free)
+                for (k, (g, &xk)) in geo[..m].iter_mut().zip(&xe[lo..hi]).enumerate() {
+                    let dx = x - xk;
+                    let d = (dx * dx + z * z).sqrt();
+                    let tau = (dtx + d) * inv_c;
+                    let u = if with_f {
+                        -(dx - z * self.tan_rx) * inv_width
+                    } else if ne > 1 {
+                        (lo + k) as f64 * u_step - 0.5
+                    } else {
+                        0.0
+                    };
+                    let aw = if hann {
+                        let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
+                        c * c
+                    } else {
+                        1.0
+                    };
+                    let (s, c) = sincos_fast(wc * tau);
+                    let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
+                    *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, z * inv_d];
+                }
             }
             // the taps: I/Q index and f32 weights (linear or nearest), on the trace or not
             let it = geo[..m].iter().zip(&mut index[..m]).zip(&mut w0[..m]).zip(&mut w1[..m]).zip(&mut valid[..m]);
@@ -853,16 +972,24 @@ fn with_ctx<T>(
             allowed: ">= 2 and n_samples·n_elements < 2^32",
         });
     }
-    let model = TxModel::new(tx, params);
     let p = params;
-    let xe: Vec<f64> = (0..p.n_elements).map(|e| p.element_x(e)).collect();
+    let convex = Convex::of(p);
+    if let Some(cv) = &convex {
+        cv.check_grid(grid)?;
+    }
+    let model = TxModel::new(tx, params);
+    let xe: Vec<f64> = match &convex {
+        Some(cv) => cv.xe.clone(),
+        None => (0..p.n_elements).map(|e| p.element_x(e)).collect(),
+    };
     let (tan_rx, cos_rx) = (p.rx_angle.tan(), p.rx_angle.cos());
     let wc = 2.0 * std::f64::consts::PI * p.fc;
     let last = match p.interpolation {
         Interpolation::Linear => (n_samples - 2) as f64,
         Interpolation::Nearest => (n_samples - 1) as f64,
     };
-    f(&RowCtx { model: &model, p, xe: &xe, tan_rx, cos_rx, wc, last, grid, n_samples })
+    let convex = convex.as_ref();
+    f(&RowCtx { model: &model, p, xe: &xe, convex, tan_rx, cos_rx, wc, last, grid, n_samples })
 }
 
 /// The images of `n_frames` element-major I/Q frames (`frames`: `n_frames × n_elements ×
@@ -1106,6 +1233,7 @@ mod tests {
             t0: 0.0,
             pitch: 0.3e-3,
             n_elements: 32,
+            radius: None,
             fnumber: 1.5,
             rx_angle: 0.0,
             interpolation: Interpolation::Linear,
@@ -1150,6 +1278,7 @@ mod tests {
                 t0: 1e-6,
                 pitch: 0.3e-3,
                 n_elements: ne,
+                radius: None,
                 fnumber,
                 rx_angle: if fnumber > 0.0 { 0.05 } else { 0.0 },
                 interpolation,
@@ -1175,6 +1304,7 @@ mod tests {
             t0: 0.0,
             pitch: 0.3e-3,
             n_elements: ne,
+            radius: None,
             fnumber: 1.0,
             rx_angle: 0.0,
             interpolation: Interpolation::Linear,

@@ -8,8 +8,9 @@
 //! 1. [`Rf2Iq`] ([`rf2iq`]): RF → I/Q by down-mixing at fc and a zero-phase Butterworth low-pass.
 //! 2. [`DasPlan`] ([`das`]): delay-and-sum onto a [`Grid`] for a [`TxWave`] (plane wave at any
 //!    tilt, focused, diverging, arbitrary delays), f-number receive aperture steered by a receive
-//!    angle, linear interpolation and I/Q phase rotation, as a precomputed sparse operator;
-//!    [`CompoundPlan`] for coherent compounding over transmits.
+//!    angle, linear interpolation and I/Q phase rotation, as a precomputed sparse operator, for
+//!    linear and convex arrays ([`convex`], MUST `radius`); [`CompoundPlan`] for coherent
+//!    compounding over transmits.
 //!
 //! Slow-time processing of the beamformed packets (clutter filter, Doppler estimators, vector
 //! Doppler) lives in `sonoflow-doppler`.
@@ -19,6 +20,7 @@
 
 pub mod bmode;
 pub mod butterworth;
+pub mod convex;
 pub mod das;
 pub mod error;
 pub mod grid;

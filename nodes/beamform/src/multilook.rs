@@ -274,6 +274,7 @@ impl MultiLookBeamformer {
                     t0: h.t0,
                     pitch: h.pitch,
                     n_elements: ne,
+                    radius: None,
                     fnumber: self.params.fnumber,
                     rx_angle: rx,
                     interpolation: self.params.interpolation,

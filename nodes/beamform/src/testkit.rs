@@ -77,6 +77,7 @@ pub fn paper_das(fnumber: f64, rx_angle: f64, fs: f64) -> DasParams {
         t0: 0.0,
         pitch: 0.30e-3,
         n_elements: 128,
+        radius: None,
         fnumber,
         rx_angle,
         interpolation: Interpolation::Linear,
@@ -95,7 +96,11 @@ pub struct RfSim {
 
 impl RfSim {
     pub fn new(max_distance: f64, max_delay: f64) -> Self {
-        let probe = Probe::paper_5mhz();
+        Self::with_probe(Probe::paper_5mhz(), max_distance, max_delay)
+    }
+
+    /// As [`Self::new`] for any probe (a convex one included).
+    pub fn with_probe(probe: Probe, max_distance: f64, max_delay: f64) -> Self {
         let simus = Simus::new(probe.clone(), Medium::default(), SimusOptions::default()).unwrap();
         let plan = simus.plan_for_max_distance(max_distance, max_delay).unwrap();
         let rf2iq = Rf2Iq::new(Rf2IqParams::new(probe.fc, plan.fs, Some(probe.bandwidth))).unwrap();

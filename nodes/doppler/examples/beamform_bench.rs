@@ -69,6 +69,7 @@ fn main() {
         t0: 0.0,
         pitch: 0.30e-3,
         n_elements: ne,
+        radius: None,
         fnumber: 3.0,
         rx_angle: 0.0,
         interpolation: Interpolation::Linear,

@@ -88,6 +88,7 @@ fn main() {
             t0: 0.0,
             pitch: probe.pitch,
             n_elements: probe.n_elements,
+            radius: None,
             fnumber: fnum,
             rx_angle: rx,
             interpolation: Interpolation::Linear,

@@ -149,6 +149,7 @@ mod tests {
                 t0: 0.0,
                 pitch: a.pitch,
                 n_elements: a.n_elements,
+                radius: None,
                 fnumber: a.fnumber,
                 rx_angle: rx,
                 interpolation: Interpolation::Linear,

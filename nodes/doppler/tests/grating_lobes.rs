@@ -67,6 +67,7 @@ fn lateral_gain(pitch: f64, fd: f64, bandwidth: Option<f64>) -> f64 {
             t0: 0.0,
             pitch,
             n_elements: probe.n_elements,
+            radius: None,
             fnumber: 3.0,
             rx_angle: rx_deg.to_radians(),
             interpolation: Interpolation::Linear,

@@ -49,7 +49,9 @@
 //! (PyMUST rounds them to f32), the phasor recursion is re-anchored (PyMUST drifts by up to
 //! 3.3e-5 rad across the band), sums and the inverse FFT are f64. Scatterers off the imaging
 //! plane ([`Simus::simulate_3d`]) get MUST's elevation model (element height, elevation focus,
-//! MGBM) on the exact kernel. Convex arrays, chirps (`TXfreqsweep`), receive delays and MLT
+//! MGBM) on the exact kernel. Convex arrays (`Probe::radius`, C5-2v) as MUST: elements on the
+//! arc ([`Probe::element_positions`]), sub-elements along each element, angles from each
+//! element's normal, no field behind the face. Chirps (`TXfreqsweep`), receive delays and MLT
 //! (several delay rows) are not implemented.
 
 mod error;
@@ -81,7 +83,7 @@ pub use noise::{NoiseModel, NoiseParams};
 pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
 pub use phantom::{genscat, must_meandist, resolution_cell_area, Inclusion, Phantom, PhantomParams};
 pub use pressure::{pfield, pfield_3d, PfieldOptions, PressureField};
-pub use probe::{Baffle, Probe, PRESET_NAMES};
+pub use probe::{Baffle, ElementPosition, Probe, PRESET_NAMES};
 pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams, TransmitField};
 pub use scatterers::{ScattererSlices, Scatterers};
 pub use simus::{zero_small_values, RfFrame, Simus};

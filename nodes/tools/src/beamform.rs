@@ -25,6 +25,7 @@
 //! | `c` (m/s) | — | optional (1540) | optional (1540) |
 //! | `pitch` (m) | — | required | — |
 //! | `Nelements` (`n_elements`, `nelements`) | — | optional (the I/Q's element count) | — |
+//! | `radius` (m) | — | optional (absent or inf: linear array; finite: convex, MUST's geometry) | — |
 //! | `fnumber` | — | optional (0 = full aperture, MUST) | — |
 //! | `RXangle` (`rx_angle`, `rxangle`, rad) | — | optional (0; `--rx-angle` wins) | — |
 //! | `interpolation` (`linear`/`nearest`) | — | optional (linear) | — |
@@ -59,6 +60,8 @@ pub struct ToolParam {
     /// Number of elements (MUST `Nelements`).
     #[serde(alias = "Nelements", alias = "nelements")]
     pub n_elements: Option<usize>,
+    /// Radius of curvature (m, MUST `radius`): finite = convex array, inf or absent = linear.
+    pub radius: Option<f64>,
     /// Receive f-number.
     pub fnumber: Option<f64>,
     /// Receive angle (rad, MUST `RXangle`).
@@ -423,6 +426,7 @@ pub fn run_das(a: &DasArgs) -> anyhow::Result<i32> {
         t0,
         pitch: need(p.pitch, "pitch", "element pitch, m", &a.param)?,
         n_elements,
+        radius: p.radius.filter(|r| !(r.is_infinite() && *r > 0.0)),
         fnumber: p.fnumber.unwrap_or(0.0),
         rx_angle,
         interpolation: p.interpolation.unwrap_or_default(),
