@@ -95,7 +95,7 @@ fn malformed_launch_files_give_one_clear_error_per_problem() {
             &dangling_input_and_type_mismatch(),
             &[],
             &[
-                "carries RfFrameV2 but topic `iq` is IqFrameV2",
+                "carries RfFrameV3 but topic `iq` is IqFrameV3",
                 "topic `iq` is consumed by checker but no node produces it",
             ],
         ),
@@ -208,5 +208,5 @@ fn replay_refuses_a_retired_wire_version_naming_it() {
     let out = run_graph("tests/launch/replay.toml", &out_dir, &["--set", &set]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_ne!(out.status.code(), Some(0), "{err}");
-    assert!(err.contains("RfFrameV1") && err.contains("retired") && err.contains("RfFrameV2"), "{err}");
+    assert!(err.contains("RfFrameV1") && err.contains("retired") && err.contains("RfFrameV3"), "{err}");
 }

@@ -425,7 +425,7 @@ fn platelet_tools_generate_train_and_run_the_five_particles() {
 
 // ---- recordings: inspect, inspect --verify, a closed stdout ---------------------------------
 
-/// A finished recording of 40 `RfFrameV2` messages (4096 samples each) on topic `rf`, 64 KiB
+/// A finished recording of 40 `RfFrameV3` messages (4096 samples each) on topic `rf`, 64 KiB
 /// chunks, and a metadata record `big` with `metadata_keys` entries (for a long `inspect`
 /// output). Returns the file's bytes.
 fn small_recording(
@@ -436,7 +436,7 @@ fn small_recording(
 ) -> Vec<u8> {
     use sonoflow_mcap_io::{ChannelSpec, OutMessage, RecorderWriter, WriterOptions};
     use sonoflow_messages::{cdr, MessageType};
-    let kind = MessageType::RfFrameV2;
+    let kind = MessageType::RfFrameV3;
     let opts = WriterOptions { compression, chunk_size: 64 * 1024, ..WriterOptions::default() };
     let mut w = RecorderWriter::create(path, opts).unwrap();
     let rf = w
@@ -489,7 +489,7 @@ fn inspect_verify_decodes_every_chunk_and_names_the_damaged_one() {
         out.contains("complete MCAP (summary only; run with --verify to decode every chunk and check CRCs)"),
         "{out}"
     );
-    assert!(out.contains("sonoflow_msgs/msg/RfFrameV2") && out.contains("40 messages"), "{out}");
+    assert!(out.contains("sonoflow_msgs/msg/RfFrameV3") && out.contains("40 messages"), "{out}");
 
     let (code, out, err) = inspect(&["--verify".as_ref(), rec.as_os_str()]);
     assert_eq!(code, 0, "{out}\n{err}");
@@ -526,14 +526,14 @@ fn inspect_verify_decodes_every_chunk_and_names_the_damaged_one() {
     assert!(err.contains("Chunk CRC failed"), "{err}");
     assert!(!out.contains("verify: ok"), "{out}");
 
-    // A record that is not a valid RfFrameV2 (CRCs fine): --verify names the message.
+    // A record that is not a valid RfFrameV3 (CRCs fine): --verify names the message.
     let malformed = dir.path().join("malformed.mcap");
     small_recording(&malformed, sonoflow_mcap_io::Compression::Zstd, 0, Some(7));
     assert_eq!(inspect(&[malformed.as_os_str()]).0, 0);
     let (code, _, err) = inspect(&["--verify".as_ref(), malformed.as_os_str()]);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("message 7 on `rf` (log time 8000000, in the chunk at byte offset "), "{err}");
-    assert!(err.contains("RfFrameV2 record declares 4097 elements but carries 16384 payload bytes"), "{err}");
+    assert!(err.contains("RfFrameV3 record declares 4097 elements but carries 16384 payload bytes"), "{err}");
 }
 
 /// `sonoflow inspect … | head`: the reader goes away after a few bytes while the command still

@@ -17,12 +17,12 @@ pub trait Transportable {}
 impl<T> Transportable for T {}
 use std::fmt::Debug;
 
-/// Every topic kind of the graph. The string form (`"RfFrameV2"`) is what launch files use.
+/// Every topic kind of the graph. The string form (`"RfFrameV3"`) is what launch files use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum MessageType {
     ParticleSnapshotV1,
-    RfFrameV2,
-    IqFrameV2,
+    RfFrameV3,
+    IqFrameV3,
     DopplerMapV2,
     VectorFieldV2,
     StageStatsV1,
@@ -33,8 +33,8 @@ impl MessageType {
     /// All message types.
     pub const ALL: [MessageType; 7] = [
         MessageType::ParticleSnapshotV1,
-        MessageType::RfFrameV2,
-        MessageType::IqFrameV2,
+        MessageType::RfFrameV3,
+        MessageType::IqFrameV3,
         MessageType::DopplerMapV2,
         MessageType::VectorFieldV2,
         MessageType::StageStatsV1,
@@ -45,8 +45,8 @@ impl MessageType {
     pub fn name(self) -> &'static str {
         match self {
             MessageType::ParticleSnapshotV1 => "ParticleSnapshotV1",
-            MessageType::RfFrameV2 => "RfFrameV2",
-            MessageType::IqFrameV2 => "IqFrameV2",
+            MessageType::RfFrameV3 => "RfFrameV3",
+            MessageType::IqFrameV3 => "IqFrameV3",
             MessageType::DopplerMapV2 => "DopplerMapV2",
             MessageType::VectorFieldV2 => "VectorFieldV2",
             MessageType::StageStatsV1 => "StageStatsV1",
@@ -112,12 +112,14 @@ impl std::fmt::Display for MessageType {
 
 /// Wire versions this sonoflow no longer reads: (old name, replacement, what changed).
 pub const RETIRED: &[(&str, &str, &str)] = &[
-    ("RfFrameV1", "RfFrameV2", "the header gained the element width"),
+    ("RfFrameV1", "RfFrameV3", "the header gained the element width and the radius of a convex array"),
+    ("RfFrameV2", "RfFrameV3", "the header gained the radius of a convex array"),
     (
         "IqFrameV1",
-        "IqFrameV2",
-        "the header gained the receive aperture: pitch, width, f-number, n_elements, apodisation",
+        "IqFrameV3",
+        "the header gained the receive aperture: pitch, width, f-number, n_elements, apodisation, radius",
     ),
+    ("IqFrameV2", "IqFrameV3", "the receive aperture gained the radius of a convex array"),
     (
         "DopplerMapV1",
         "DopplerMapV2",
@@ -166,11 +168,11 @@ macro_rules! message_type {
 message_type!(ParticleSnapshot, ParticleSnapshotV1, ParticleSnapshotHeaderV1, ParticleV1, |h| Some(
     h.n_particles as usize
 ));
-message_type!(RfFrame, RfFrameV2, RfFrameHeaderV2, f32, |h| {
+message_type!(RfFrame, RfFrameV3, RfFrameHeaderV3, f32, |h| {
     let per = if h.sample_format == SAMPLE_IQ_F32 { 2 } else { 1 };
     Some(h.n_channels as usize * h.n_samples as usize * per)
 });
-message_type!(IqFrame, IqFrameV2, IqFrameHeaderV2, Complex32, |h| Some(h.grid.nx as usize * h.grid.nz as usize));
+message_type!(IqFrame, IqFrameV3, IqFrameHeaderV3, Complex32, |h| Some(h.grid.nx as usize * h.grid.nz as usize));
 message_type!(DopplerMap, DopplerMapV2, DopplerMapHeaderV2, f32, |h| Some(
     h.grid.nx as usize * h.grid.nz as usize * h.n_planes as usize
 ));
@@ -189,11 +191,11 @@ macro_rules! with_type {
                 type $M = $crate::types::ParticleSnapshot;
                 $body
             }
-            $crate::MessageType::RfFrameV2 => {
+            $crate::MessageType::RfFrameV3 => {
                 type $M = $crate::types::RfFrame;
                 $body
             }
-            $crate::MessageType::IqFrameV2 => {
+            $crate::MessageType::IqFrameV3 => {
                 type $M = $crate::types::IqFrame;
                 $body
             }
@@ -233,9 +235,13 @@ mod tests {
             assert_eq!(MessageType::from_schema_name(&k.schema_name()), Ok(k));
         }
         let e = MessageType::from_schema_name("sonoflow_msgs/msg/IqFrameV1").unwrap_err();
-        assert!(e.contains("IqFrameV1") && e.contains("retired") && e.contains("IqFrameV2"), "{e}");
+        assert!(e.contains("IqFrameV1") && e.contains("retired") && e.contains("IqFrameV3"), "{e}");
         let e = MessageType::parse("RfFrameV1").unwrap_err();
-        assert!(e.contains("RfFrameV2") && e.contains("element width"), "{e}");
+        assert!(e.contains("RfFrameV3") && e.contains("element width"), "{e}");
+        for old in ["RfFrameV2", "IqFrameV2"] {
+            let e = MessageType::parse(old).unwrap_err();
+            assert!(e.contains(old) && e.contains("retired") && e.contains("radius of a convex array"), "{e}");
+        }
         let e = MessageType::parse("VectorFieldV1").unwrap_err();
         assert!(e.contains("VectorFieldV2") && e.contains("clutter filter"), "{e}");
         let e = MessageType::parse("IqFrame").unwrap_err();

@@ -51,8 +51,8 @@ pub fn viz_schema(kind: MessageType) -> Option<foxglove::Schema> {
     match kind {
         MessageType::ParticleSnapshotV1 => foxglove::schemas::PointCloud::get_schema(),
         MessageType::DopplerMapV2 | MessageType::VectorFieldV2 => foxglove::schemas::Grid::get_schema(),
-        MessageType::IqFrameV2 => foxglove::schemas::RawImage::get_schema(),
-        MessageType::RfFrameV2 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
+        MessageType::IqFrameV3 => foxglove::schemas::RawImage::get_schema(),
+        MessageType::RfFrameV3 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
     }
 }
 
@@ -97,8 +97,8 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
             let h: VectorFieldHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
             grid(h.common.t_valid, &h.grid, h.n_planes, &h.plane_ids, payload)
         }
-        MessageType::IqFrameV2 => {
-            let h: IqFrameHeaderV2 = bytemuck::try_pod_read_unaligned(header).ok()?;
+        MessageType::IqFrameV3 => {
+            let h: IqFrameHeaderV3 = bytemuck::try_pod_read_unaligned(header).ok()?;
             let iq: Vec<Complex32> = bytemuck::pod_collect_to_vec(payload);
             let (nx, nz) = (h.grid.nx as usize, h.grid.nz as usize);
             if iq.len() != nx * nz || iq.is_empty() {
@@ -123,7 +123,7 @@ pub fn viz(kind: MessageType, header: &[u8], payload: &[u8]) -> Option<VizMessag
                 data: data.into(),
             })
         }
-        MessageType::RfFrameV2 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
+        MessageType::RfFrameV3 | MessageType::StageStatsV1 | MessageType::FlowStatsV1 => None,
     }
 }
 

@@ -6,7 +6,7 @@ use crate::wire_struct;
 #[allow(unused_imports)]
 use iceoryx2::prelude::ZeroCopySend;
 
-/// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV2`].
+/// Maximum number of transmit elements whose delays fit in an [`RfFrameHeaderV3`].
 pub const MAX_TX_ELEMENTS: usize = 256;
 /// Maximum number of planes in a map ([`DopplerMapHeaderV2`], [`VectorFieldHeaderV2`]).
 pub const MAX_PLANES: usize = 8;
@@ -107,15 +107,15 @@ wire_struct! {
     }
 }
 
-/// `RfFrameHeaderV2::sample_format`: real RF, f32, payload `[channel][sample]`.
+/// `RfFrameHeaderV3::sample_format`: real RF, f32, payload `[channel][sample]`.
 pub const SAMPLE_RF_F32: u32 = 0;
-/// `RfFrameHeaderV2::sample_format`: I/Q interleaved f32 (re, im), payload `[channel][sample][2]`.
+/// `RfFrameHeaderV3::sample_format`: I/Q interleaved f32 (re, im), payload `[channel][sample][2]`.
 pub const SAMPLE_IQ_F32: u32 = 1;
 
 wire_struct! {
     /// Header of one received RF frame (one transmit). Payload: f32, channel-major
     /// (`data[ch·n_samples + k]`), sample k at t = t0 + k/fs.
-    pub struct RfFrameHeaderV2 as "sonoflow_msgs/RfFrameHeaderV2" {
+    pub struct RfFrameHeaderV3 as "sonoflow_msgs/RfFrameHeaderV3" {
         pub common: MsgHeaderV1,
         /// Sampling frequency (Hz).
         pub fs: f64,
@@ -133,6 +133,9 @@ wire_struct! {
         pub prf: f64,
         /// Element width (m, ≤ pitch; 0 = unknown): the element directivity downstream.
         pub element_width: f64,
+        /// Radius of curvature of a convex array (m, MUST `radius`); 0 = linear array. The
+        /// elements lie on the arc (MUST `getElementPositions`).
+        pub radius: f64,
         pub n_channels: u32,
         pub n_samples: u32,
         /// Transmit index within the sequence.
@@ -160,7 +163,7 @@ wire_struct! {
     /// Header of a beamformed I/Q image for one receive angle; it carries the receive aperture
     /// the image was formed with, so a consumer needs no copy of the beamformer's config. Payload: `Complex32`, row-major
     /// on `grid` (`iz·nx + ix`).
-    pub struct IqFrameHeaderV2 as "sonoflow_msgs/IqFrameHeaderV2" {
+    pub struct IqFrameHeaderV3 as "sonoflow_msgs/IqFrameHeaderV3" {
         pub common: MsgHeaderV1,
         pub grid: GridV1,
         pub fc: f64,
@@ -176,6 +179,8 @@ wire_struct! {
         pub element_width: f64,
         /// Receive aperture: f-number of the beamformer (0 = the whole array at every pixel).
         pub fnumber: f64,
+        /// Receive aperture: radius of curvature of a convex array (m); 0 = linear array.
+        pub radius: f64,
         pub packet: u32,
         pub frame_in_packet: u32,
         pub tx_id: u32,
@@ -188,9 +193,9 @@ wire_struct! {
     }
 }
 
-/// `IqFrameHeaderV2::apodization`: equal weights.
+/// `IqFrameHeaderV3::apodization`: equal weights.
 pub const APODIZATION_BOXCAR: u32 = 0;
-/// `IqFrameHeaderV2::apodization`: Hann window across the aperture.
+/// `IqFrameHeaderV3::apodization`: Hann window across the aperture.
 pub const APODIZATION_HANN: u32 = 1;
 
 /// Plane ids of maps ([`DopplerMapHeaderV2::plane_ids`], [`VectorFieldHeaderV2::plane_ids`]).

@@ -11,9 +11,9 @@ fn sizes_are_pinned() {
     assert_eq!(size_of::<GridV1>(), 40);
     assert_eq!(size_of::<ParticleSnapshotHeaderV1>(), 112);
     assert_eq!(size_of::<ParticleV1>(), 32);
-    assert_eq!(size_of::<RfFrameHeaderV2>(), 1176);
+    assert_eq!(size_of::<RfFrameHeaderV3>(), 1184);
     assert_eq!(size_of::<Complex32>(), 8);
-    assert_eq!(size_of::<IqFrameHeaderV2>(), 192);
+    assert_eq!(size_of::<IqFrameHeaderV3>(), 200);
     assert_eq!(size_of::<DopplerMapHeaderV2>(), 224);
     assert_eq!(size_of::<VectorFieldHeaderV2>(), 200);
     assert_eq!(size_of::<StageStatsHeaderV1>(), 128);
@@ -24,7 +24,7 @@ fn sizes_are_pinned() {
         // the payload starts on its natural alignment.
         assert_eq!(k.header_size() % 8, 0, "{k}");
     }
-    assert!(align_of::<RfFrameHeaderV2>() <= 8);
+    assert!(align_of::<RfFrameHeaderV3>() <= 8);
 }
 
 #[test]
@@ -38,22 +38,22 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(MsgHeaderV1, flags), 44);
     assert_eq!(offset_of!(MsgHeaderV1, source_id), 48);
     assert_eq!(offset_of!(MsgHeaderV1, schema_minor), 52);
-    assert_eq!(offset_of!(RfFrameHeaderV2, fs), 64);
-    assert_eq!(offset_of!(RfFrameHeaderV2, t0), 72);
-    assert_eq!(offset_of!(RfFrameHeaderV2, fc), 80);
-    assert_eq!(offset_of!(RfFrameHeaderV2, element_width), 120);
-    assert_eq!(offset_of!(RfFrameHeaderV2, n_channels), 128);
-    assert_eq!(offset_of!(RfFrameHeaderV2, n_samples), 132);
-    assert_eq!(offset_of!(RfFrameHeaderV2, tx_delays), 152);
+    assert_eq!(offset_of!(RfFrameHeaderV3, fs), 64);
+    assert_eq!(offset_of!(RfFrameHeaderV3, t0), 72);
+    assert_eq!(offset_of!(RfFrameHeaderV3, fc), 80);
+    assert_eq!(offset_of!(RfFrameHeaderV3, element_width), 120);
+    assert_eq!(offset_of!(RfFrameHeaderV3, n_channels), 136);
+    assert_eq!(offset_of!(RfFrameHeaderV3, n_samples), 140);
+    assert_eq!(offset_of!(RfFrameHeaderV3, tx_delays), 160);
     assert_eq!(offset_of!(ParticleSnapshotHeaderV1, n_particles), 64);
     assert_eq!(offset_of!(ParticleSnapshotHeaderV1, packet), 96);
     assert_eq!(offset_of!(ParticleSnapshotHeaderV1, packet_size), 104);
     assert_eq!(offset_of!(ParticleV1, x), 8);
     assert_eq!(offset_of!(ParticleV1, amplitude), 24);
-    assert_eq!(offset_of!(IqFrameHeaderV2, grid), 64);
-    assert_eq!(offset_of!(IqFrameHeaderV2, rx_angle), 128);
-    assert_eq!(offset_of!(IqFrameHeaderV2, pitch), 144);
-    assert_eq!(offset_of!(IqFrameHeaderV2, n_elements), 180);
+    assert_eq!(offset_of!(IqFrameHeaderV3, grid), 64);
+    assert_eq!(offset_of!(IqFrameHeaderV3, rx_angle), 128);
+    assert_eq!(offset_of!(IqFrameHeaderV3, pitch), 144);
+    assert_eq!(offset_of!(IqFrameHeaderV3, n_elements), 188);
     assert_eq!(offset_of!(DopplerMapHeaderV2, plane_ids), 192);
     assert_eq!(offset_of!(VectorFieldHeaderV2, plane_ids), 168);
     assert_eq!(offset_of!(StageStatsHeaderV1, messages_in), 72);
@@ -67,8 +67,8 @@ fn offsets_are_pinned() {
 /// of the primitive sizes equals the struct size (so CDR = the raw bytes, see `cdr`).
 #[test]
 fn ros_schema_matches_struct() {
-    let text = MessageType::RfFrameV2.schema_text();
-    assert!(text.starts_with("sonoflow_msgs/RfFrameHeaderV2 header\nfloat32[] data\n"), "{text}");
+    let text = MessageType::RfFrameV3.schema_text();
+    assert!(text.starts_with("sonoflow_msgs/RfFrameHeaderV3 header\nfloat32[] data\n"), "{text}");
     assert!(text.contains("MSG: sonoflow_msgs/MsgHeaderV1\nuint64 seq\nuint64 frame_id\nfloat64 t_valid\n"));
     assert!(text.contains("float32[256] tx_delays\n"));
     fn prim_size(t: &str) -> usize {
@@ -111,7 +111,7 @@ fn ros_schema_matches_struct() {
 
 #[test]
 fn cdr_round_trip_and_errors() {
-    let mut h = RfFrameHeaderV2::default();
+    let mut h = RfFrameHeaderV3::default();
     h.common.seq = 7;
     h.common.t_valid = 0.125;
     h.n_channels = 3;
@@ -123,7 +123,7 @@ fn cdr_round_trip_and_errors() {
     cdr::encode_into::<RfFrame>(&h, &payload, &mut buf);
     assert_eq!(buf.len(), cdr::encoded_len::<RfFrame>(15));
     assert_eq!(&buf[..4], &[0, 1, 0, 0]);
-    assert_eq!(u32::from_le_bytes(buf[4 + 1176..8 + 1176].try_into().unwrap()), 15);
+    assert_eq!(u32::from_le_bytes(buf[4 + 1184..8 + 1184].try_into().unwrap()), 15);
     let (h2, p2) = cdr::decode::<RfFrame>(&buf).unwrap();
     assert_eq!(h2, h);
     assert_eq!(p2, payload);
@@ -134,7 +134,7 @@ fn cdr_round_trip_and_errors() {
     cdr::encode_into::<RfFrame>(&h, &payload[..14], &mut bad);
     assert!(matches!(cdr::decode::<RfFrame>(&bad), Err(cdr::DecodeError::Dimensions { .. })));
     bad[1] = 0;
-    assert!(matches!(cdr::split(MessageType::RfFrameV2, &bad), Err(cdr::DecodeError::Encapsulation { .. })));
+    assert!(matches!(cdr::split(MessageType::RfFrameV3, &bad), Err(cdr::DecodeError::Encapsulation { .. })));
 }
 
 #[test]

@@ -13,7 +13,7 @@ import sys
 import numpy as np
 from mcap.reader import make_reader
 
-# sonoflow_msgs/MsgHeaderV1 (64 bytes) and RfFrameHeaderV2 (1176 bytes), little endian.
+# sonoflow_msgs/MsgHeaderV1 (64 bytes) and RfFrameHeaderV3 (1184 bytes), little endian.
 MSG_HEADER = [
     ("seq", "<u8"), ("frame_id", "<u8"), ("t_valid", "<f8"), ("t_pub_ns", "<u8"),
     ("compute_ns", "<u8"), ("incarnation", "<u4"), ("flags", "<u4"), ("source_id", "<u4"),
@@ -22,11 +22,11 @@ MSG_HEADER = [
 RF_HEADER = np.dtype([
     ("common", np.dtype(MSG_HEADER)),
     ("fs", "<f8"), ("t0", "<f8"), ("fc", "<f8"), ("c", "<f8"), ("pitch", "<f8"),
-    ("tx_angle", "<f8"), ("prf", "<f8"), ("element_width", "<f8"),
+    ("tx_angle", "<f8"), ("prf", "<f8"), ("element_width", "<f8"), ("radius", "<f8"),
     ("n_channels", "<u4"), ("n_samples", "<u4"), ("tx_id", "<u4"), ("sample_format", "<u4"),
     ("packet", "<u4"), ("frame_in_packet", "<u4"), ("tx_delays", "<f4", (256,)),
 ])
-assert RF_HEADER.itemsize == 1176, RF_HEADER.itemsize
+assert RF_HEADER.itemsize == 1184, RF_HEADER.itemsize
 
 
 def decode_rf(data: bytes):

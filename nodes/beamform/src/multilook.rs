@@ -26,6 +26,8 @@ pub struct RfInfo {
     pub pitch: f64,
     /// Plane-wave tilt of the transmit (rad).
     pub tx_angle: f64,
+    /// Radius of curvature of a convex array (m); None = linear array.
+    pub radius: Option<f64>,
     /// Elements (channels).
     pub n_elements: usize,
     /// Samples per channel.
@@ -171,14 +173,22 @@ impl BeamformerParams {
 /// Bit-exact key of everything a DAS plan depends on besides the node parameters.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 struct PlanKey {
-    bits: [u64; 6],
+    bits: [u64; 7],
     n_elements: usize,
     n_samples: usize,
 }
 
 fn plan_key(h: &RfInfo) -> PlanKey {
     PlanKey {
-        bits: [h.fs.to_bits(), h.t0.to_bits(), h.fc.to_bits(), h.c.to_bits(), h.pitch.to_bits(), h.tx_angle.to_bits()],
+        bits: [
+            h.fs.to_bits(),
+            h.t0.to_bits(),
+            h.fc.to_bits(),
+            h.c.to_bits(),
+            h.pitch.to_bits(),
+            h.tx_angle.to_bits(),
+            h.radius.unwrap_or(0.0).to_bits(),
+        ],
         n_elements: h.n_elements,
         n_samples: h.n_samples,
     }
@@ -274,7 +284,7 @@ impl MultiLookBeamformer {
                     t0: h.t0,
                     pitch: h.pitch,
                     n_elements: ne,
-                    radius: None,
+                    radius: h.radius,
                     fnumber: self.params.fnumber,
                     rx_angle: rx,
                     interpolation: self.params.interpolation,
@@ -314,7 +324,17 @@ mod tests {
     #[test]
     fn demod_fc_sets_the_demodulation_and_the_iq_fc() {
         let (ns, ne, fs) = (400usize, 4usize, 20e6);
-        let h = RfInfo { fs, t0: 0.0, fc: 5e6, c: 1540.0, pitch: 0.3e-3, tx_angle: 0.0, n_elements: ne, n_samples: ns };
+        let h = RfInfo {
+            fs,
+            t0: 0.0,
+            fc: 5e6,
+            c: 1540.0,
+            pitch: 0.3e-3,
+            tx_angle: 0.0,
+            radius: None,
+            n_elements: ne,
+            n_samples: ns,
+        };
         let rf: Vec<f32> =
             (0..ne * ns).map(|k| (2.0 * std::f64::consts::PI * 3.6e6 * (k % ns) as f64 / fs).cos() as f32).collect();
         let phase_spread = |demod: Option<f64>| {

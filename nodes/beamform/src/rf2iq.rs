@@ -31,7 +31,7 @@ use crate::C32;
 #[serde(rename_all = "snake_case")]
 pub enum Layout {
     /// `data[e·n_samples + k]`: each element's trace contiguous. This is the SIMUS crate's
-    /// `RfFrame` layout, `RfFrameV2`'s `[channel][sample]`, and column-major samples × elements.
+    /// `RfFrame` layout, `RfFrameV3`'s `[channel][sample]`, and column-major samples × elements.
     #[default]
     ElementMajor,
     /// `data[k·n_elements + e]`: a C-order `(n_samples, n_elements)` array (PyMUST/numpy `.npy`).

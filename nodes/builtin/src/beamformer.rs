@@ -3,14 +3,14 @@
 //! Each RF frame → one I/Q image per receive angle in `rx_angles_deg` (RF→I/Q, delay-and-sum
 //! onto `grid` for the frame's plane-wave tilt, receive sub-apertures at `fnumber`). Each image's
 //! header carries its look (transmit tilt, receive angle, demodulation fc) and the receive
-//! aperture (pitch, element count and width from the RF header; f-number and apodisation from
-//! the params), so the Doppler node needs no copy of this configuration.
+//! aperture (pitch, element count, width and a convex array's radius from the RF header;
+//! f-number and apodisation from the params), so the Doppler node needs no copy of this configuration.
 
 use sonoflow_beamform::{Apodization, BeamformerParams, MultiLookBeamformer, RfInfo, C32};
 use sonoflow_messages::types::{IqFrame, RfFrame};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    Complex32, GridV1, IqFrameHeaderV2, MsgHeaderV1, RfFrameHeaderV2, APODIZATION_BOXCAR, APODIZATION_HANN,
+    Complex32, GridV1, IqFrameHeaderV3, MsgHeaderV1, RfFrameHeaderV3, APODIZATION_BOXCAR, APODIZATION_HANN,
     SAMPLE_RF_F32,
 };
 use sonoflow_node_kit::PortDir::*;
@@ -20,7 +20,7 @@ use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec,
 pub const SPEC: KindSpec = KindSpec::new(
     "beamformer",
     "RF → I/Q (MUST rf2iq) → delay-and-sum on a grid, one I/Q image per receive sub-aperture angle",
-    &[port("rf", In, RfFrameV2, true), port("iq", Out, IqFrameV2, true)],
+    &[port("rf", In, RfFrameV3, true), port("iq", Out, IqFrameV3, true)],
     validate,
     run,
 );
@@ -30,7 +30,7 @@ pub fn validate(v: &serde_json::Value) -> Result<(), String> {
 }
 
 /// The library's view of an RF header.
-pub fn rf_info(h: &RfFrameHeaderV2) -> RfInfo {
+pub fn rf_info(h: &RfFrameHeaderV3) -> RfInfo {
     RfInfo {
         fs: h.fs,
         t0: h.t0,
@@ -38,17 +38,18 @@ pub fn rf_info(h: &RfFrameHeaderV2) -> RfInfo {
         c: h.c,
         pitch: h.pitch,
         tx_angle: h.tx_angle,
+        radius: (h.radius > 0.0).then_some(h.radius),
         n_elements: h.n_channels as usize,
         n_samples: h.n_samples as usize,
     }
 }
 
 /// The I/Q header of receive angle `j` for RF frame `h`.
-pub fn iq_header(bf: &MultiLookBeamformer, h: &RfFrameHeaderV2, j: usize) -> IqFrameHeaderV2 {
+pub fn iq_header(bf: &MultiLookBeamformer, h: &RfFrameHeaderV3, j: usize) -> IqFrameHeaderV3 {
     let p = bf.params();
     let g = &p.grid;
     let n_rx = p.rx_angles_deg.len() as u64;
-    IqFrameHeaderV2 {
+    IqFrameHeaderV3 {
         common: MsgHeaderV1 {
             frame_id: h.common.frame_id * n_rx + j as u64,
             t_valid: h.common.t_valid,
@@ -66,6 +67,7 @@ pub fn iq_header(bf: &MultiLookBeamformer, h: &RfFrameHeaderV2, j: usize) -> IqF
         pitch: h.pitch,
         element_width: h.element_width,
         fnumber: p.fnumber,
+        radius: h.radius,
         n_elements: h.n_channels,
         apodization: match p.apodization {
             Apodization::Boxcar => APODIZATION_BOXCAR,
@@ -118,7 +120,7 @@ mod tests {
     /// frame get distinct frame ids.
     #[test]
     fn iq_header_carries_the_look_and_the_receive_aperture() {
-        let h = RfFrameHeaderV2 {
+        let h = RfFrameHeaderV3 {
             fs: 20e6,
             fc: 5e6,
             c: 1540.0,

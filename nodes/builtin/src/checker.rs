@@ -14,7 +14,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec::new(
     "checker",
     "verifies test-source frames (× gain) bit for bit and writes <node>.json in the run folder",
-    &[port("rf", In, RfFrameV2, true)],
+    &[port("rf", In, RfFrameV3, true)],
     validate_checker,
     run_checker,
 );

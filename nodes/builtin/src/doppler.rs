@@ -12,7 +12,7 @@ use sonoflow_doppler::{Aperture, Estimator, LookHeader, PacketAssembler, PacketP
 use sonoflow_messages::types::{DopplerMap as DopplerMapMsg, IqFrame, VectorField};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV2, APODIZATION_HANN,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV3, MsgHeaderV1, VectorFieldHeaderV2, APODIZATION_HANN,
     CLUTTER_IIR, CLUTTER_NONE, CLUTTER_POLYNOMIAL, CLUTTER_SVD, ESTIMATOR_AUTOCORRELATION, ESTIMATOR_LOUPAS,
     VECTOR_RAW,
 };
@@ -24,7 +24,7 @@ pub const SPEC: KindSpec = KindSpec::new(
     "doppler",
     "colour + vector Doppler per packet: lag-L slow-time autocorrelation (eq. 19) or Loupas per look, fc²-weighted least-squares (vx, vz) through each look's receive aperture",
     &[
-        port("iq", In, IqFrameV2, true),
+        port("iq", In, IqFrameV3, true),
         port("vector", Out, VectorFieldV2, true),
         port("maps", Out, DopplerMapV2, false),
     ],
@@ -38,7 +38,7 @@ pub fn validate(v: &serde_json::Value) -> Result<(), String> {
 
 /// The library's view of an I/Q header: grid, look and receive aperture (none if
 /// `n_elements` = 0).
-pub fn look_header(h: &IqFrameHeaderV2) -> LookHeader {
+pub fn look_header(h: &IqFrameHeaderV3) -> LookHeader {
     let g = h.grid;
     LookHeader {
         grid: Grid { x0: g.x0, z0: g.z0, dx: g.dx, dz: g.dz, nx: g.nx as usize, nz: g.nz as usize },
@@ -55,6 +55,7 @@ pub fn look_header(h: &IqFrameHeaderV2) -> LookHeader {
             n_elements: h.n_elements as usize,
             fnumber: h.fnumber,
             width: (h.element_width > 0.0).then_some(h.element_width),
+            radius: (h.radius > 0.0).then_some(h.radius),
             apodization: if h.apodization == APODIZATION_HANN { Apodization::Hann } else { Apodization::Boxcar },
         }),
     }

@@ -33,7 +33,7 @@ pub const SPEC: KindSpec = KindSpec::new(
             port("raw", In, VectorFieldV2, false),
             port("regularised", In, VectorFieldV2, false),
             port("maps", In, DopplerMapV2, false),
-            port("iq", In, IqFrameV2, false),
+            port("iq", In, IqFrameV3, false),
         ],
     validate,
     run,

@@ -13,7 +13,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec::new(
     "gain",
     "multiplies RF frames by a constant (a minimal processing stage)",
-    &[port("rf_in", In, RfFrameV2, true), port("rf_out", Out, RfFrameV2, true)],
+    &[port("rf_in", In, RfFrameV3, true), port("rf_out", Out, RfFrameV3, true)],
     validate_gain,
     run_gain,
 );

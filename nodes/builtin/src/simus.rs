@@ -10,7 +10,7 @@
 use sonoflow_messages::types::{ParticleSnapshot, RfFrame};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
-    ParticleSnapshotHeaderV1, ParticleV1, RfFrameHeaderV2, MAX_TX_ELEMENTS, PARTICLE_TISSUE, PARTICLE_TISSUE_MOVING,
+    ParticleSnapshotHeaderV1, ParticleV1, RfFrameHeaderV3, MAX_TX_ELEMENTS, PARTICLE_TISSUE, PARTICLE_TISSUE_MOVING,
     SAMPLE_RF_F32,
 };
 use sonoflow_node_kit::PortDir::*;
@@ -23,7 +23,7 @@ use sonoflow_simus::{
 pub const SPEC: KindSpec = KindSpec::new(
     "simus",
     "SIMUS RF synthesiser (MUST's model): particle snapshots → RF frames, one per plane-wave tilt",
-    &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV2, true)],
+    &[port("particles", In, ParticleSnapshotV1, true), port("rf", Out, RfFrameV3, true)],
     validate,
     run,
 );
@@ -140,9 +140,9 @@ fn rf_header(
     pl: &FrequencyPlan,
     h: &ParticleSnapshotHeaderV1,
     tx_id: usize,
-) -> RfFrameHeaderV2 {
+) -> RfFrameHeaderV3 {
     let (probe, (angle, tx)) = (&scan.probe, &scan.transmits[tx_id]);
-    let mut rh = RfFrameHeaderV2 {
+    let mut rh = RfFrameHeaderV3 {
         fs: pl.fs,
         t0: pl.t0,
         fc: probe.fc,
@@ -151,6 +151,7 @@ fn rf_header(
         tx_angle: *angle,
         prf: p.prf,
         element_width: Some(probe.element_width()).filter(|w| w.is_finite()).unwrap_or(0.0),
+        radius: probe.convex_radius().unwrap_or(0.0),
         n_channels: probe.n_elements as u32,
         n_samples: pl.n_samples as u32,
         tx_id: tx_id as u32,

@@ -23,7 +23,7 @@ pub const SPEC: KindSpec = KindSpec::new(
     "speckle-tracking",
     "speckle tracking per packet (MUST sptrack): ensemble FFT cross-correlation of the envelope between frames t and t + lag, multi-pass windows, sub-pixel peak, median test; the vector field on the image grid",
     &[
-        port("iq", In, IqFrameV2, true),
+        port("iq", In, IqFrameV3, true),
         port("vector", Out, VectorFieldV2, true),
         port("maps", Out, DopplerMapV2, false),
     ],

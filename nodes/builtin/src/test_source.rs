@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::types::RfFrame;
 use sonoflow_messages::MessageType::*;
-use sonoflow_messages::RfFrameHeaderV2;
+use sonoflow_messages::RfFrameHeaderV3;
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{in_range, parse_params, thread_cpu_ns, Kit};
 use sonoflow_node_kit::{port, KindSpec};
@@ -13,7 +13,7 @@ use sonoflow_node_kit::{port, KindSpec};
 pub const SPEC: KindSpec = KindSpec::new(
     "test-source",
     "deterministic RF test frames (pattern from seed and sequence number)",
-    &[port("rf", Out, RfFrameV2, true)],
+    &[port("rf", Out, RfFrameV3, true)],
     validate_source,
     run_source,
 );
@@ -89,7 +89,7 @@ pub fn run_source(mut kit: Kit) -> anyhow::Result<()> {
             }
         }
         let t0 = thread_cpu_ns();
-        let mut h = RfFrameHeaderV2 {
+        let mut h = RfFrameHeaderV3 {
             fs: 20e6,
             fc: 5e6,
             c: 1540.0,

@@ -4,7 +4,7 @@
 
 use sonoflow_builtin::doppler::{look_header, packet_messages, to_c32};
 use sonoflow_doppler::{PacketAssembler, PacketParams};
-use sonoflow_messages::{plane, Complex32, GridV1, IqFrameHeaderV2};
+use sonoflow_messages::{plane, Complex32, GridV1, IqFrameHeaderV3};
 
 /// Looks of one angle in two bands stay two looks (streams per (tilt, angle, fc)), and the
 /// vector solve weights each by fc²: uniform phase ramps of a known velocity (v_D = a·v,
@@ -23,7 +23,7 @@ fn looks_in_two_bands_are_kept_apart_and_weighted_by_fc_squared() {
             let vd = (a[0] * v[0] + a[1] * v[1]) * if wrong == Some(j) { 1.1 } else { 1.0 };
             let step = 4.0 * std::f64::consts::PI * fc * vd / (c * prf);
             for n in 0..n_frames {
-                let h = IqFrameHeaderV2 {
+                let h = IqFrameHeaderV3 {
                     grid: GridV1 { x0: 0.0, z0: 0.02, dx: 1e-4, dz: 1e-4, nx: nx as u32, nz: nz as u32 },
                     fc,
                     c,

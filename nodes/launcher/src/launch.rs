@@ -50,7 +50,7 @@ fn d_grace() -> f64 {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TopicDecl {
-    /// Message type (`RfFrameV2`, …).
+    /// Message type (`RfFrameV3`, …).
     #[serde(rename = "type")]
     pub message_type: String,
     /// Maximum payload elements per message.
@@ -92,7 +92,7 @@ pub struct NodeDecl {
     /// Arguments of `exec`.
     #[serde(default)]
     pub args: Vec<String>,
-    /// Port types of an `exec` node (`port = "RfFrameV2"`), checked against the topics.
+    /// Port types of an `exec` node (`port = "RfFrameV3"`), checked against the topics.
     #[serde(default)]
     pub ports: BTreeMap<String, String>,
     /// Input port → topic.
@@ -743,8 +743,8 @@ mod tests {
 [graph]
 name = "g"
 [topics]
-rf = { type = "RfFrameV2", max_elements = 1024 }
-out = { type = "RfFrameV2", max_elements = 1024 }
+rf = { type = "RfFrameV3", max_elements = 1024 }
+out = { type = "RfFrameV3", max_elements = 1024 }
 [nodes.src]
 kind = "test-source"
 outputs = { rf = "rf" }
@@ -781,7 +781,7 @@ kind = "recorder"
         KindSpec::new(
             "test-source",
             "",
-            &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV2, true)],
+            &[sonoflow_node_kit::port("rf", PortDir::Out, MessageType::RfFrameV3, true)],
             positive_params,
             never,
         ),
@@ -789,8 +789,8 @@ kind = "recorder"
             "gain",
             "",
             &[
-                sonoflow_node_kit::port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
-                sonoflow_node_kit::port("rf_out", PortDir::Out, MessageType::RfFrameV2, true),
+                sonoflow_node_kit::port("rf_in", PortDir::In, MessageType::RfFrameV3, true),
+                sonoflow_node_kit::port("rf_out", PortDir::Out, MessageType::RfFrameV3, true),
             ],
             positive_params,
             never,
@@ -838,7 +838,7 @@ kind = "recorder"
         assert_eq!(g.stats.as_ref().unwrap().max_subscribers, 1, "only the recorder gets the statistics");
         let errs = res(Overrides { add_nodes: vec![viewer(&["rf"])], ..Default::default() }).unwrap_err();
         assert!(
-            errs.iter().any(|e| e.contains("topic `rf` carries RfFrameV2, which a viewer node does not take")),
+            errs.iter().any(|e| e.contains("topic `rf` carries RfFrameV3, which a viewer node does not take")),
             "{errs:?}"
         );
         let (_, decl) = viewer(&["*"]);

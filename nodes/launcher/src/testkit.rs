@@ -8,7 +8,7 @@ pub const MINIMAL_GRAPH: &str = r#"
 [graph]
 name = "g"
 [topics]
-rf = { type = "RfFrameV2", max_elements = 1024 }
+rf = { type = "RfFrameV3", max_elements = 1024 }
 [nodes.source]
 kind = "test-source"
 outputs = { rf = "rf" }
@@ -28,7 +28,7 @@ pub fn unknown_key() -> String {
 pub fn dangling_input_and_type_mismatch() -> String {
     MINIMAL_GRAPH
         .replace("inputs = { rf = \"rf\" }", "inputs = { rf = \"iq\" }")
-        .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV2\", max_elements = 10 }\n")
+        .replace("[topics]\n", "[topics]\niq = { type = \"IqFrameV3\", max_elements = 10 }\n")
 }
 
 /// [`MINIMAL_GRAPH`] with two parameters out of range at once (`n_channels = 0`,

@@ -420,8 +420,8 @@ mod tests {
     #[test]
     fn a_topic_without_a_picture_is_refused_by_name() {
         let o = LiveOptions { port: 0, ..LiveOptions::default() };
-        let e = LiveView::start(&o, &[("rf".into(), MessageType::RfFrameV2)]).err().map(|e| e.to_string());
-        assert!(e.unwrap_or_default().contains("topic `rf` carries RfFrameV2"));
+        let e = LiveView::start(&o, &[("rf".into(), MessageType::RfFrameV3)]).err().map(|e| e.to_string());
+        assert!(e.unwrap_or_default().contains("topic `rf` carries RfFrameV3"));
     }
 }
 

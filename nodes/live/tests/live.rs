@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 const TOPICS: [(&str, MessageType); 4] = [
     ("particles", MessageType::ParticleSnapshotV1),
-    ("iq", MessageType::IqFrameV2),
+    ("iq", MessageType::IqFrameV3),
     ("maps", MessageType::DopplerMapV2),
     ("vector", MessageType::VectorFieldV2),
 ];
@@ -41,7 +41,7 @@ fn particles(n: usize) -> (Vec<u8>, Vec<u8>) {
 
 /// One message of each picture topic, in `TOPICS` order.
 fn one_of_each() -> Vec<(Vec<u8>, Vec<u8>)> {
-    let iq = IqFrameHeaderV2 { grid: grid(7, 5), ..Default::default() };
+    let iq = IqFrameHeaderV3 { grid: grid(7, 5), ..Default::default() };
     let iq_payload: Vec<f32> = (0..70).map(|i| (i % 7) as f32 + 0.5).collect();
     let mut maps = DopplerMapHeaderV2 { grid: grid(6, 4), n_planes: 2, ..Default::default() };
     maps.plane_ids[0] = plane::VELOCITY;

@@ -14,7 +14,7 @@ pub const NODE_CONFIG_ENV: &str = "SONOFLOW_NODE_CONFIG";
 pub struct TopicQos {
     /// Topic name (service `sonoflow/<run_id>/<topic>`).
     pub topic: String,
-    /// Message type name (`RfFrameV2`, …).
+    /// Message type name (`RfFrameV3`, …).
     pub message_type: String,
     /// Maximum payload elements per message (hard limit of the shared-memory slots).
     pub max_elements: usize,

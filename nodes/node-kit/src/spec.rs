@@ -273,9 +273,9 @@ mod tests {
         "test",
         "a test kind",
         &[
-            port("rf_in", PortDir::In, MessageType::RfFrameV2, true),
-            port("iq_in", PortDir::In, MessageType::IqFrameV2, false),
-            port("rf_in", PortDir::Out, MessageType::RfFrameV2, true),
+            port("rf_in", PortDir::In, MessageType::RfFrameV3, true),
+            port("iq_in", PortDir::In, MessageType::IqFrameV3, false),
+            port("rf_in", PortDir::Out, MessageType::RfFrameV3, true),
         ],
         validate,
         run,
@@ -284,7 +284,7 @@ mod tests {
     #[test]
     fn kind_spec_finds_ports_by_name_and_direction() {
         let p = SPEC.port("rf_in", PortDir::In).unwrap();
-        assert_eq!((p.message_type, p.required), (MessageType::RfFrameV2, true));
+        assert_eq!((p.message_type, p.required), (MessageType::RfFrameV3, true));
         assert_eq!(SPEC.port("iq_in", PortDir::In).map(|p| p.required), Some(false));
         assert_eq!(SPEC.port("rf_in", PortDir::Out).map(|p| p.dir), Some(PortDir::Out));
         assert!(SPEC.port("iq_in", PortDir::Out).is_none());

@@ -15,7 +15,7 @@
 
 use sonoflow_messages::types::{RfFrame, StageStats};
 use sonoflow_messages::{
-    MessageType, MsgHeaderV1, RfFrameHeaderV2, StageStatsHeaderV1, FLAG_END_OF_STREAM, FLAG_REPLAYED, STAGE_FINISHED,
+    MessageType, MsgHeaderV1, RfFrameHeaderV3, StageStatsHeaderV1, FLAG_END_OF_STREAM, FLAG_REPLAYED, STAGE_FINISHED,
     STAGE_RUNNING,
 };
 use sonoflow_node_kit::{
@@ -66,11 +66,11 @@ fn within<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
     }
 }
 
-/// An `RfFrameV2` topic with one publisher and `subscribers` subscribers, all expected.
+/// An `RfFrameV3` topic with one publisher and `subscribers` subscribers, all expected.
 fn rf_topic(topic: &str, depth: usize, subscribers: usize) -> TopicQos {
     TopicQos {
         topic: topic.into(),
-        message_type: MessageType::RfFrameV2.name().into(),
+        message_type: MessageType::RfFrameV3.name().into(),
         max_elements: 64,
         depth,
         max_subscribers: subscribers.max(1),
@@ -109,8 +109,8 @@ fn hold_topics(run_id: &str, topics: &[&TopicQos]) -> Vec<Box<dyn Any>> {
 }
 
 /// An RF header with recognisable values in every field a producer sets.
-fn rf_header(frame_id: u64, n_channels: u32, n_samples: u32) -> RfFrameHeaderV2 {
-    let mut h = RfFrameHeaderV2 {
+fn rf_header(frame_id: u64, n_channels: u32, n_samples: u32) -> RfFrameHeaderV3 {
+    let mut h = RfFrameHeaderV3 {
         fs: 40e6 + frame_id as f64,
         t0: 1.5e-6,
         fc: 5.2e6,
@@ -180,7 +180,7 @@ fn pair(test: &str, depth: usize) -> Pair {
     Pair { producer, consumer, out, input }
 }
 
-fn assert_rf_header_kept(got: &RfFrameHeaderV2, sent: &RfFrameHeaderV2) {
+fn assert_rf_header_kept(got: &RfFrameHeaderV3, sent: &RfFrameHeaderV3) {
     // Everything but the common fields the kit sets is as sent, bit for bit.
     let (a, b) = (bytemuck::bytes_of(got), bytemuck::bytes_of(sent));
     let common = std::mem::size_of::<MsgHeaderV1>();
@@ -678,7 +678,7 @@ fn unwired_port_and_wrong_message_type_are_named() {
         }
         match kit.input::<StageStats>("rf_in") {
             Err(KitError::Config(msg)) => {
-                assert_eq!(msg, "topic `rf` carries RfFrameV2 but the port expects StageStatsV1");
+                assert_eq!(msg, "topic `rf` carries RfFrameV3 but the port expects StageStatsV1");
             }
             Err(e) => panic!("expected a Config error, got {e}"),
             Ok(_) => panic!("expected a Config error"),
@@ -776,8 +776,8 @@ fn dyn_ports_pass_raw_bytes() {
         let consumer = Kit::new(node_cfg(&id, "rec", &[], &[])).unwrap();
         let mut out = producer.dyn_output(&q).unwrap();
         let mut input = consumer.dyn_input(&q).unwrap();
-        assert_eq!((out.kind(), out.topic_name()), (MessageType::RfFrameV2, "rf"));
-        assert_eq!((input.kind(), input.topic_name()), (MessageType::RfFrameV2, "rf"));
+        assert_eq!((out.kind(), out.topic_name()), (MessageType::RfFrameV3, "rf"));
+        assert_eq!((input.kind(), input.topic_name()), (MessageType::RfFrameV3, "rf"));
         producer.handshake(&mut [out.as_mut(), input.as_mut()]).unwrap();
 
         let mut h = rf_header(8, 1, 3);
@@ -785,7 +785,7 @@ fn dyn_ports_pass_raw_bytes() {
         h.common.source_id = 77;
         let payload = [0.5f32, -1.0, 3.0];
         let err = out.publish_bytes(&bytemuck::bytes_of(&h)[1..], bytemuck::cast_slice(&payload), 0).unwrap_err();
-        assert!(err.to_string().contains("RfFrameV2 expects"), "{err}");
+        assert!(err.to_string().contains("RfFrameV3 expects"), "{err}");
         out.publish_bytes(bytemuck::bytes_of(&h), bytemuck::cast_slice(&payload), FLAG_REPLAYED).unwrap();
         out.eos(9.0).unwrap();
         assert_eq!(out.sent(), 1);

@@ -3,7 +3,7 @@
     [nodes.doppler.variants.python]
     exec = "python3"
     args = ["../nodes/python/examples/lag1_estimator.py"]   # relative to the launch file
-    ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }
+    ports = { iq = "IqFrameV3", vector = "VectorFieldV2", maps = "DopplerMapV2" }
 
     sonoflow run launch/quickstart.toml --swap doppler=python
 

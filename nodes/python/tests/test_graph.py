@@ -48,7 +48,7 @@ def test_recording_decodes_as_the_pypi_reader_does(quick):
     assert rec.complete
     topics = rec.topics()
     assert topics["regularised"] == ("VectorFieldV2", 1)
-    assert topics["iq"][0] == "IqFrameV2"
+    assert topics["iq"][0] == "IqFrameV3"
     ours = {(m.topic, m.sequence): m for m in rec.messages(["regularised", "iq", "truth"])}
     theirs = {}
     with open(quick["recording"], "rb") as f:
@@ -60,7 +60,7 @@ def test_recording_decodes_as_the_pypi_reader_does(quick):
         d = theirs[key]
         g = m.header["grid"]
         assert (g["nx"], g["nz"]) == (d.header.grid.nx, d.header.grid.nz)
-        if m.type == "IqFrameV2":
+        if m.type == "IqFrameV3":
             want = np.array([complex(c.re, c.im) for c in d.data], dtype=np.complex64)
             assert m.header["fc"] == d.header.fc and m.header["rx_angle"] == d.header.rx_angle
             assert m.data.size == g["nx"] * g["nz"]
@@ -107,7 +107,7 @@ def test_python_estimator_swaps_in_and_agrees_with_the_built_in(tmp_path):
     text = open(os.path.join(ROOT, "launch", "quickstart.toml"), encoding="utf-8").read()
     example = os.path.join(ROOT, "nodes", "python", "examples", "lag1_estimator.py")
     text += (f'\n[nodes.doppler.variants.python]\nexec = {sys.executable!r}\nargs = [{example!r}]\n'
-             'ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }\n')
+             'ports = { iq = "IqFrameV3", vector = "VectorFieldV2", maps = "DopplerMapV2" }\n')
     launch = tmp_path / "quickstart-python.toml"
     launch.write_text(text.replace("'", '"'), encoding="utf-8")
     common = {"flow.schedule.n_packets": 1, "flow.density_per_mm2": 4.0, "doppler.projection": "nominal"}

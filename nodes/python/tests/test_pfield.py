@@ -79,7 +79,7 @@ def test_parameters_match_pymust(variant):
     (lambda p, x, z, d: (x, None, z, d[:, :10], p), ValueError, "delaysTX"),
     (lambda p, x, z, d: (x, None, z, -np.abs(d) - 1e-6, p), ValueError, "≥ 0"),
     (lambda p, x, z, d: (x * np.nan, None, z, d, p), ValueError, "x"),
-    (lambda p, x, z, d: (x, None, z, d, {**dict(p), "radius": 0.05}), ValueError, "convex"),
+    (lambda p, x, z, d: (x, None, z, d, {**dict(p), "radius": -0.05}), ValueError, "radius"),
     (lambda p, x, z, d: (x, None, z, d, p, {"dBThresh": 3}), ValueError, "dB"),
 ])
 def test_bad_inputs(args, exc, needle):

@@ -99,11 +99,6 @@ impl ScanParams {
     pub fn scan(&self, max_elements: usize) -> std::result::Result<Scan, String> {
         let probe = self.probe.resolve().map_err(|e| format!("probe: {e}"))?;
         probe.validate().map_err(|e| e.to_string())?;
-        if let Some(radius) = probe.convex_radius() {
-            // the RF/I-Q headers carry a linear aperture (pitch, n_elements) only
-            let name = "the graph (the RF header has no radius field)".into();
-            return Err(format!("probe.radius: {}", SimusError::ConvexNotSupported { name, radius }));
-        }
         self.medium.validate().map_err(|e| e.to_string())?;
         self.options.validate(probe.fc).map_err(|e| e.to_string())?;
         if probe.n_elements > max_elements {
@@ -273,9 +268,6 @@ mod tests {
         assert!(scan(serde_json::json!({ "tx_tukey": 0.5 })).is_ok());
         let e = scan(serde_json::json!({ "tilts_deg": [0.0, 95.0] })).unwrap_err();
         assert!(e.contains("tilts_deg[1]"), "{e}");
-        // a convex probe is refused in the graph, with the reason
-        let e = scan(serde_json::json!({ "probe": "C5-2v" })).unwrap_err();
-        assert!(e.contains("probe.radius") && e.contains("convex arrays are not supported by the graph"), "{e}");
     }
 }
 

@@ -97,7 +97,7 @@ pub(super) fn cases() -> Vec<Case> {
             "dangling-input-and-type-mismatch",
             "an input wired to a topic of the wrong type that nobody produces: both problems reported at once",
             Expected::ClearError(&[
-                "carries RfFrameV2 but topic `iq` is IqFrameV2",
+                "carries RfFrameV3 but topic `iq` is IqFrameV3",
                 "topic `iq` is consumed by checker but no node produces it",
             ]),
             dangling,

@@ -9,7 +9,7 @@
 use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 use sonoflow_messages::types::RfFrame;
-use sonoflow_messages::{RfFrameHeaderV2, FLAG_END_OF_STREAM};
+use sonoflow_messages::{RfFrameHeaderV3, FLAG_END_OF_STREAM};
 use sonoflow_node_kit::{is_eos, unix_ns, KindSpec, Kit, KitError, NodeConfig, TopicQos, NODE_CONFIG_ENV};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -174,8 +174,8 @@ fn fill_value(i: usize, frame: u64) -> f32 {
     (i as i32).wrapping_add(frame as i32) as f32
 }
 
-fn frame_header(frame: u64, n_samples: usize) -> RfFrameHeaderV2 {
-    let mut h = RfFrameHeaderV2 {
+fn frame_header(frame: u64, n_samples: usize) -> RfFrameHeaderV3 {
+    let mut h = RfFrameHeaderV3 {
         fs: 20e6,
         fc: 5e6,
         c: 1540.0,
@@ -359,7 +359,7 @@ fn run_iox(exe: &Path, tmp: &Path, frames: u64, n_samples: usize, read_all: bool
     let run_id = format!("bench-{}-{}", std::process::id(), unix_ns());
     let qos = TopicQos {
         topic: "frames".into(),
-        message_type: "RfFrameV2".into(),
+        message_type: "RfFrameV3".into(),
         max_elements: n,
         depth: 4,
         max_subscribers: 1,
@@ -451,7 +451,7 @@ fn run_unix(exe: &Path, tmp: &Path, frames: u64, n_samples: usize, read_all: boo
             stream.write_all(bytemuck::bytes_of(&h))?;
             stream.write_all(bytemuck::cast_slice(&payload))?;
         }
-        let mut h = RfFrameHeaderV2::default();
+        let mut h = RfFrameHeaderV3::default();
         h.common.flags = FLAG_END_OF_STREAM;
         h.common.seq = frames;
         stream.write_all(bytemuck::bytes_of(&h))?;
@@ -558,7 +558,7 @@ fn peer_unix(sock: &Path, read_all: bool) -> anyhow::Result<PeerResult> {
     stream.set_read_timeout(Some(PEER_TIMEOUT))?;
     let mut tally = Tally::new();
     let mut buf: Vec<f32> = Vec::new();
-    let mut h = RfFrameHeaderV2::default();
+    let mut h = RfFrameHeaderV3::default();
     let (mut gaps, mut eos, mut expected) = (0u64, false, 0u64);
     loop {
         match stream.read_exact(bytemuck::bytes_of_mut(&mut h)) {
@@ -660,7 +660,7 @@ fn recorder_once(
 name = "bench-recorder"
 
 [topics]
-rf = {{ type = "RfFrameV2", max_elements = 1048576, depth = 4 }}
+rf = {{ type = "RfFrameV3", max_elements = 1048576, depth = 4 }}
 
 [nodes.source]
 kind = "test-source"

@@ -5,7 +5,7 @@
 //! ```toml
 //! [nodes.doppler.variants.external]
 //! exec = "sonoflow-example-estimator"
-//! ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }
+//! ports = { iq = "IqFrameV3", vector = "VectorFieldV2", maps = "DopplerMapV2" }
 //! ```
 //! `sonoflow run launch/quickstart.toml --swap doppler=external`.
 //!
@@ -17,7 +17,7 @@
 
 use sonoflow_messages::types::{DopplerMap, IqFrame, VectorField};
 use sonoflow_messages::{
-    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV2, MsgHeaderV1, VectorFieldHeaderV2, VECTOR_RAW,
+    plane, Complex32, DopplerMapHeaderV2, IqFrameHeaderV3, MsgHeaderV1, VectorFieldHeaderV2, VECTOR_RAW,
 };
 use sonoflow_node_kit::{is_eos, thread_cpu_ns, Kit, Output};
 use std::collections::BTreeMap;
@@ -51,7 +51,7 @@ fn main() {
 
 /// Frames of one (transmit, receive) angle pair within the current packet.
 struct Pair {
-    header: IqFrameHeaderV2,
+    header: IqFrameHeaderV3,
     frames: Vec<Vec<Complex32>>,
 }
 

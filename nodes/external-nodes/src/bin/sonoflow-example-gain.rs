@@ -4,7 +4,7 @@
 //! ```toml
 //! [nodes.gain]
 //! exec = "sonoflow-example-gain"
-//! ports = { rf_in = "RfFrameV2", rf_out = "RfFrameV2" }
+//! ports = { rf_in = "RfFrameV3", rf_out = "RfFrameV3" }
 //! inputs = { rf_in = "rf" }
 //! outputs = { rf_out = "rf_gain" }
 //! params = { gain = 2.0 }

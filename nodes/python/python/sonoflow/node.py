@@ -5,7 +5,7 @@ A launch file runs a Python node as an ``exec`` node (its own process, like any 
     [nodes.doppler.variants.python]
     exec = "python3"                     # an interpreter that can import sonoflow
     args = ["estimator.py"]              # relative to the launch file's folder
-    ports = { iq = "IqFrameV2", vector = "VectorFieldV2", maps = "DopplerMapV2" }
+    ports = { iq = "IqFrameV3", vector = "VectorFieldV2", maps = "DopplerMapV2" }
 
 and the program speaks the wire format through this package (the node kit's ports; headers as
 the dicts ``Recording`` yields, laid out by the wire structs' own schemas):
