@@ -682,7 +682,7 @@ fn convex_array_runs_in_the_graph() {
         (ih.radius, w, wx, wz)
     };
     let (cv, lin) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
-    run_graph_ok("tests/launch/convex-disk.toml", cv.path(), &[]);
+    run_graph_ok("launch/convex-disk.toml", cv.path(), &[]);
     let linear = [
         "--set",
         "simus.probe={ fc = 3.57e6, pitch = 0.508e-3, width = 0.46e-3, n_elements = 128, bandwidth = 79.0 }",
@@ -693,7 +693,7 @@ fn convex_array_runs_in_the_graph() {
         "--set",
         "beamformer.grid.z0=0.03",
     ];
-    run_graph_ok("tests/launch/convex-disk.toml", lin.path(), &linear);
+    run_graph_ok("launch/convex-disk.toml", lin.path(), &linear);
     let (r, w, wx, wz) = omega(cv.path(), 0.05);
     let (r_lin, w_lin, _, wz_lin) = omega(lin.path(), 0.04);
     println!("convex disk omega: truth {w:.2}; raw from vx {wx:.2}, from vz {wz:.2}; linear from vz {wz_lin:.2} rad/s");
