@@ -204,7 +204,9 @@ fn simus_rf2iq_das_focuses_a_point_scatterer() {
 /// The same chain on the convex C5-2v, its geometry from a MUST param file with `radius` (the
 /// tools read it; the das tool's "plane wave" is MUST's tangent-line law on the arc, as simus's
 /// `--tilt-deg`): a scatterer 40 mm in front of the face on the 15° beam focuses within λ/10
-/// (−3 dB centroid, F# 1.5); the same file without `radius` (a linear array) does not.
+/// (−3 dB centroid, F# 1.5). The radius also travels through the sidecars (simus → rf2iq → das):
+/// a das param file without it focuses as well; one that says `radius = inf` (a linear array)
+/// does not, with a warning.
 #[test]
 fn convex_simus_rf2iq_das_chain_focuses() {
     let dir = tempfile::tempdir().unwrap();
@@ -216,28 +218,36 @@ fn convex_simus_rf2iq_das_chain_focuses() {
     std::fs::write(d("s.csv"), format!("x,z,rc\n{xs},{zs},1\n")).unwrap();
     let convex = r#"{"fc": 3.57e6, "pitch": 5.08e-4, "width": 4.6e-4, "Nelements": 128, "bandwidth": 79, "radius": 0.04957, "fnumber": 1.5}"#;
     std::fs::write(d("c.json"), convex).unwrap();
-    std::fs::write(d("lin.json"), convex.replace(r#", "radius": 0.04957"#, "")).unwrap();
+    std::fs::write(d("nor.json"), convex.replace(r#", "radius": 0.04957"#, "")).unwrap();
+    std::fs::write(d("lin.toml"), "fc = 3.57e6\npitch = 5.08e-4\nNelements = 128\nradius = inf\nfnumber = 1.5\n")
+        .unwrap();
     let (sc, cj, rf, iqp) = (d("s.csv"), d("c.json"), d("rf.npy"), d("iq.npy"));
     let args = ["--scatterers", s(&sc), "--param", s(&cj), "--tilt-deg", "5", "--out", s(&rf)];
     let (code, _, err) = cli("simus", &args);
     assert_eq!(code, 0, "{err}");
-    let (code, _, err) = cli("rf2iq", &["--rf", s(&rf), "--param", s(&cj), "--out", s(&iqp)]);
+    assert_eq!(json(&d("rf.json"))["radius"].as_f64(), Some(0.04957));
+    let (code, _, err) = cli("rf2iq", &["--rf", s(&rf), "--param", s(&d("nor.json")), "--out", s(&iqp)]);
     assert_eq!(code, 0, "{err}");
+    assert_eq!(json(&d("iq.json"))["radius"].as_f64(), Some(0.04957));
     let grid = Grid { x0: xs - 1.5e-3, dx: 3e-5, nx: 101, z0: zs - 1.5e-3, dz: 3e-5, nz: 101 };
     let grid_arg = format!("{},{},{},{},{},{}", grid.x0, grid.dx, grid.nx, grid.z0, grid.dz, grid.nz);
     let mut errors = Vec::new();
-    for param in ["c.json", "lin.json"] {
+    for param in ["c.json", "nor.json", "lin.toml"] {
         let (iq, pp, out) = (d("iq.npy"), d(param), d("bf.npy"));
         let args = ["--iq", s(&iq), "--param", s(&pp), "--grid", &grid_arg, "--tx-angle", "5", "--out", s(&out)];
         let (code, _, err) = cli("das", &args);
         assert_eq!(code, 0, "{err}");
+        if param == "lin.toml" {
+            assert!(err.contains("warning: `radius`"), "{err}");
+        }
         let (_, img) = read_c32(&out);
         let e = centroid(&img, &grid).map(|(x, z)| ((x - xs) / lambda).hypot((z - zs) / lambda));
         println!("{param}: centroid error {e:?} λ");
         errors.push(e);
     }
     assert!(errors[0].is_some_and(|e| e < 0.1), "convex: {:?}", errors[0]);
-    assert!(errors[1].is_none_or(|e| e > 1.0), "the linear geometry should not focus: {:?}", errors[1]);
+    assert_eq!(errors[1], errors[0], "the radius from the sidecar");
+    assert!(errors[2].is_none_or(|e| e > 1.0), "the linear geometry should not focus: {:?}", errors[2]);
 }
 
 /// `sonoflow simus` with a y column (x,y,z,rc): MUST's elevation model, the library's

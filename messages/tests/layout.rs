@@ -42,6 +42,7 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(RfFrameHeaderV3, t0), 72);
     assert_eq!(offset_of!(RfFrameHeaderV3, fc), 80);
     assert_eq!(offset_of!(RfFrameHeaderV3, element_width), 120);
+    assert_eq!(offset_of!(RfFrameHeaderV3, radius), 128);
     assert_eq!(offset_of!(RfFrameHeaderV3, n_channels), 136);
     assert_eq!(offset_of!(RfFrameHeaderV3, n_samples), 140);
     assert_eq!(offset_of!(RfFrameHeaderV3, tx_delays), 160);
@@ -53,6 +54,7 @@ fn offsets_are_pinned() {
     assert_eq!(offset_of!(IqFrameHeaderV3, grid), 64);
     assert_eq!(offset_of!(IqFrameHeaderV3, rx_angle), 128);
     assert_eq!(offset_of!(IqFrameHeaderV3, pitch), 144);
+    assert_eq!(offset_of!(IqFrameHeaderV3, radius), 168);
     assert_eq!(offset_of!(IqFrameHeaderV3, n_elements), 188);
     assert_eq!(offset_of!(DopplerMapHeaderV2, plane_ids), 192);
     assert_eq!(offset_of!(VectorFieldHeaderV2, plane_ids), 168);

@@ -20,8 +20,9 @@
 
 pub mod bmode;
 pub mod butterworth;
-pub mod convex;
 pub mod das;
+/// Convex-array geometry (MUST `radius`), the delay-and-sum's helper module.
+pub use das::convex;
 pub mod error;
 pub mod grid;
 pub mod multilook;

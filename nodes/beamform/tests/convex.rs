@@ -337,8 +337,12 @@ fn convex_errors_name_the_field() {
     assert_eq!(field_of(e), "das.n_elements");
     assert!(DasPlan::new(&small(62), &tx, &g, 3000).is_ok());
     let tiny = |n: usize| DasParams { radius: Some(0.2e-3), n_elements: n, ..c5(0.0, 0.0, Apodization::Boxcar) };
-    assert_eq!(field_of(tiny(2).validate().unwrap_err()), "das.n_elements");
-    assert!(tiny(1).validate().is_ok());
+    // the pitch is a chord of the arc: never wider than the diameter, whatever the count
+    assert_eq!(field_of(tiny(2).validate().unwrap_err()), "das.pitch");
+    assert_eq!(field_of(tiny(1).validate().unwrap_err()), "das.pitch");
+    // beside the arc but behind its chord (z < 0: MUST's isOUT), refused for any array
+    let below = Grid { x0: 40e-3, z0: -1e-3, dx: 1e-3, dz: 1e-3, nx: 3, nz: 3 };
+    assert_eq!(err(&c5(1.5, 0.0, Apodization::Boxcar), &below), "grid.z0");
     // a grid through the face (the arc bulges to 10.1 mm at x = 0), for the plan and the frames
     let p = c5(1.5, 0.0, Apodization::Boxcar);
     let through = Grid::spanning(-10e-3, 10e-3, 11, 0.0, 20e-3, 11).unwrap();
@@ -364,4 +368,27 @@ fn convex_errors_name_the_field() {
     assert_eq!(q.radius, Some(0.04957));
     assert!(!serde_json::to_string(&paper_das(1.0, 0.0, 20e6)).unwrap().contains("radius"));
     assert!(serde_json::to_string(&q).unwrap().contains("\"radius\":0.04957"));
+}
+
+/// The convex geometry lives in two crates (sonoflow-beamform may not depend on sonoflow-simus
+/// outside its test kit): both copies give the same element positions, normals and transmit
+/// delay laws, bit for bit, on C5-2v and a 20 mm radius, so SIMUS and the beamformer never
+/// disagree on where an element is.
+#[test]
+fn simus_and_beamform_share_the_convex_geometry() {
+    use sonoflow_simus::{Probe, Transmit};
+    for (radius, n) in [(0.04957, 128usize), (0.02, 96)] {
+        let probe = Probe { radius: Some(radius), n_elements: n, ..Probe::preset("C5-2v").unwrap() };
+        let p = DasParams { radius: Some(radius), n_elements: n, ..c5(1.5, 0.0, Apodization::Boxcar) };
+        let (xe, ze, the) = p.element_positions();
+        for (e, q) in probe.element_positions().iter().enumerate() {
+            assert_eq!((q.x, q.z, q.theta), (xe[e], ze[e], the[e]), "radius {radius}, element {e}");
+        }
+        for tilt in [0.0f64, 0.17, -0.3] {
+            let a = Transmit::plane_wave(&probe, p.c, tilt).unwrap().delays;
+            let b = TxWave::PlaneWave { tilt }.delays(&p).unwrap();
+            let worst = a.iter().zip(&b).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(worst <= 1e-18, "radius {radius}, tilt {tilt}: {worst:e} s");
+        }
+    }
 }

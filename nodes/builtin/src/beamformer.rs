@@ -29,6 +29,24 @@ pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<BeamformerParams>(v)?.validate()
 }
 
+/// A header's `radius` as the libraries take it: 0 or +∞ = a linear array (None); finite and
+/// > 0 = convex. NaN and negative values are refused by [`check_radius`] before.
+pub fn convex_radius(r: f64) -> Option<f64> {
+    (r.is_finite() && r > 0.0).then_some(r)
+}
+
+/// The RF header's `radius` is 0 or +∞ (linear) or finite and > 0 (convex).
+pub fn check_radius(h: &RfFrameHeaderV3) -> anyhow::Result<()> {
+    if h.radius.is_nan() || h.radius < 0.0 {
+        anyhow::bail!(
+            "RF frame {}: radius = {} must be 0 or inf (linear array) or > 0 m (convex array)",
+            h.common.frame_id,
+            h.radius
+        );
+    }
+    Ok(())
+}
+
 /// The library's view of an RF header.
 pub fn rf_info(h: &RfFrameHeaderV3) -> RfInfo {
     RfInfo {
@@ -38,7 +56,7 @@ pub fn rf_info(h: &RfFrameHeaderV3) -> RfInfo {
         c: h.c,
         pitch: h.pitch,
         tx_angle: h.tx_angle,
-        radius: (h.radius > 0.0).then_some(h.radius),
+        radius: convex_radius(h.radius),
         n_elements: h.n_channels as usize,
         n_samples: h.n_samples as usize,
     }
@@ -67,7 +85,7 @@ pub fn iq_header(bf: &MultiLookBeamformer, h: &RfFrameHeaderV3, j: usize) -> IqF
         pitch: h.pitch,
         element_width: h.element_width,
         fnumber: p.fnumber,
-        radius: h.radius,
+        radius: convex_radius(h.radius).unwrap_or(0.0),
         n_elements: h.n_channels,
         apodization: match p.apodization {
             Apodization::Boxcar => APODIZATION_BOXCAR,
@@ -91,6 +109,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         if h.sample_format != SAMPLE_RF_F32 {
             anyhow::bail!("RF frame {}: sample_format {} is not real f32 RF", h.common.frame_id, h.sample_format);
         }
+        check_radius(&h)?;
         bf.demodulate(&rf_info(&h), sample.payload())?;
         let demod_ns = process_cpu_ns() - t0;
         for j in 0..n_rx {
@@ -142,6 +161,19 @@ mod tests {
         assert_ne!(a.common.frame_id, b.common.frame_id);
         assert_eq!((a.pitch, a.element_width, a.n_elements), (0.3e-3, 0.265e-3, 128));
         assert_eq!((a.fnumber, a.apodization), (2.5, APODIZATION_HANN));
+        // the radius: 0 and +inf mean linear (0 in the I/Q header), a finite one passes through,
+        // NaN or negative is refused with the frame named
+        assert_eq!(a.radius, 0.0);
+        for (r, want) in [(f64::INFINITY, 0.0), (0.04957, 0.04957)] {
+            let hc = RfFrameHeaderV3 { radius: r, ..h };
+            assert!(check_radius(&hc).is_ok());
+            assert_eq!(iq_header(&bf, &hc, 0).radius, want);
+            assert_eq!(rf_info(&hc).radius, (want > 0.0).then_some(want));
+        }
+        for r in [f64::NAN, -0.01] {
+            let e = check_radius(&RfFrameHeaderV3 { radius: r, ..h }).unwrap_err().to_string();
+            assert!(e.contains("radius") && e.contains("RF frame 0"), "{e}");
+        }
     }
 
     #[test]

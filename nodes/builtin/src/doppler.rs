@@ -55,7 +55,7 @@ pub fn look_header(h: &IqFrameHeaderV3) -> LookHeader {
             n_elements: h.n_elements as usize,
             fnumber: h.fnumber,
             width: (h.element_width > 0.0).then_some(h.element_width),
-            radius: (h.radius > 0.0).then_some(h.radius),
+            radius: (h.radius.is_finite() && h.radius > 0.0).then_some(h.radius),
             apodization: if h.apodization == APODIZATION_HANN { Apodization::Hann } else { Apodization::Boxcar },
         }),
     }

@@ -92,7 +92,8 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The transmit fields over the scatterers' region (10 % margins, from at least λ deep, at least
+/// The transmit fields over the scatterers' region (10 % margins, from at least λ in front of the
+/// face, at least
 /// 0.65 aperture either side) into
 /// `dir/figures/transmit_fields.png`, listed in `dir/figures-<node>.json` for the report.
 fn field_figure(scan: &Scan, p: &ScanParams, r: [f32; 4], dir: &std::path::Path, node: &str) -> anyhow::Result<()> {
@@ -102,7 +103,10 @@ fn field_figure(scan: &Scan, p: &ScanParams, r: [f32; 4], dir: &std::path::Path,
     let lambda = p.medium.c / scan.probe.fc;
     // laterally at least 0.65 aperture either side, so that the edges of each wave show
     let half = 0.65 * scan.probe.n_elements as f64 * scan.probe.pitch;
-    let region = [(x0 - mx).min(-half), (x1 + mx).max(half), (z0 - mz).max(lambda), (z1 + mz).max(lambda + 2e-3)];
+    // from λ in front of the face: the apex of a convex array's arc, z = 0 for a linear one
+    let face = scan.probe.convex_radius().map_or(0.0, |r| r - scan.probe.apothem());
+    let top = face + lambda;
+    let region = [(x0 - mx).min(-half), (x1 + mx).max(half), (z0 - mz).max(top), (z1 + mz).max(top + 2e-3)];
     let fields = scan.transmit_fields(&p.medium, region, 96)?;
     let max = fields.iter().flat_map(|f| f.rms.iter().copied()).fold(0.0, f64::max);
     let db: Vec<Vec<f32>> =

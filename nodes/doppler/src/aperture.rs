@@ -59,8 +59,11 @@ impl Aperture {
         }
         if let Some(r) = self.radius {
             let max = sonoflow_beamform::convex::max_elements(self.pitch, r);
-            if !(r.is_finite() && r > 0.0) {
-                return Err(invalid("aperture.radius", r, "finite and > 0 m (absent: linear array)"));
+            if !(r.is_finite() && r > 0.0 && r <= sonoflow_beamform::convex::MAX_RADIUS) {
+                return Err(invalid("aperture.radius", r, "finite, > 0 and <= 1e6 m (absent: linear array)"));
+            }
+            if self.pitch > 2.0 * r {
+                return Err(invalid("aperture.pitch", self.pitch, "<= 2·radius on a convex array"));
             }
             if self.n_elements > max {
                 return Err(invalid("aperture.n_elements", self.n_elements, "at most what fits on half the arc"));
@@ -161,7 +164,7 @@ fn convex_projection(a: &Aperture, r: f64, lambda: f64, tx: f64, rx: f64, grid: 
                             let (sin_n, cos_n) = rel.sin_cos();
                             let u = std::f64::consts::PI * width * sin_n / lambda;
                             let sinc = if u.abs() < 1e-12 { 1.0 } else { u.sin() / u };
-                            (sinc * cos_n.max(0.0)) / d.sqrt()
+                            (sinc * cos_n).abs() / d.sqrt()
                         }
                     };
                 sw += w;
@@ -268,7 +271,8 @@ mod tests {
         assert_eq!(field(Aperture { fnumber: f64::NAN, ..a.clone() }), "aperture.fnumber");
         assert_eq!(field(Aperture { width: Some(0.4e-3), ..a.clone() }), "aperture.width");
         assert_eq!(field(Aperture { radius: Some(-0.04), ..a.clone() }), "aperture.radius");
-        assert_eq!(field(Aperture { radius: Some(0.01), ..a }), "aperture.n_elements");
+        assert_eq!(field(Aperture { radius: Some(0.01), ..a.clone() }), "aperture.n_elements");
+        assert_eq!(field(Aperture { radius: Some(0.1e-3), n_elements: 1, ..a }), "aperture.pitch");
     }
 
     /// On a convex array (C5-2v geometry) the projection uses the beamformer's convex aperture
@@ -289,6 +293,17 @@ mod tests {
         };
         let grid = Grid { x0: -0.02, z0: 0.05, dx: 0.01, dz: 0.02, nx: 5, nz: 2 };
         let mut worst = 0.0f32;
+        // amplitude weights (C5-2v's element width) lean on the near-normal elements: |a_x| of
+        // a steered look shrinks, as on a linear array
+        let steered = |width| {
+            let b = Aperture { width, ..a.clone() };
+            aperture_projection(&b, 3.57e6, 1540.0, 0.0, 12f64.to_radians(), &grid).unwrap()[2]
+        };
+        let (plain, weighted) = (steered(None), steered(Some(0.46e-3)));
+        assert!(
+            weighted[0].abs() < plain[0].abs() && weighted[0].abs() > 0.5 * plain[0].abs(),
+            "{weighted:?} {plain:?}"
+        );
         for (tilt, rx) in [(0.0f64, 0.0f64), (0.0, 12.0), (8.0, -12.0), (8.0, 0.0)] {
             let (tilt, rx) = (tilt.to_radians(), rx.to_radians());
             for apodization in [Apodization::Boxcar, Apodization::Hann] {

@@ -481,6 +481,15 @@ impl PacketAssembler {
     fn projection(&mut self, h: &LookHeader) -> Result<Option<Vec<[f32; 2]>>> {
         let aperture = match (self.params.projection, &h.aperture) {
             (ProjectionMode::Aperture, Some(a)) => a,
+            (ProjectionMode::Nominal, Some(a)) if a.radius.is_some() => {
+                // the plane-wave directions from the z axis do not describe looks steered from
+                // the normals of a convex array's elements
+                return Err(invalid(
+                    "projection",
+                    "nominal",
+                    "\"aperture\" for the looks of a convex array (their receive angles are taken from each element's normal)",
+                ));
+            }
             _ => return Ok(None),
         };
         let g = &h.grid;

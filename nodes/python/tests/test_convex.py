@@ -1,7 +1,7 @@
 """Convex arrays (issue 22 item 1) against PyMUST 0.1.9 on two probes — the C5-2v preset and a
 64-element 2.7 MHz array bent to a 30 mm radius (P4-2v's elements): txdelay (plane = the line
-tangent to the arc, focused, diverging) to rounding; pfield (nRMS ≤ 1e-4, also off the imaging
-plane) and simus (nRMS ≤ 1e-4, also with elevation, scatterers behind the face included) for
+tangent to the arc, focused, diverging) to rounding; pfield (nRMS 2.4e-6 – 3.6e-6, asserted < 2e-5, also off the imaging
+plane) and simus (1.5e-5 – 2.2e-5, asserted < 6e-5, also with elevation, scatterers behind the face included) for
 zero, steered, focused and diverging transmits; the field behind the face is zero; dasmtx on a
 convex array equal to PyMUST's matrix (same non-zeros, 4e-8) and images (1e-7); bad geometry
 named."""
@@ -66,7 +66,7 @@ def test_pfield_matches_pymust(name, tx):
     RP, _, IDX = pymust.pfield(x, None, z, d, copy.deepcopy(p))
     rp, _, idx = sf.pfield(x, None, z, d, p)
     assert np.array_equal(np.asarray(IDX).ravel(), idx), "frequency band"
-    assert nrms(rp, RP) < 1e-4
+    assert nrms(rp, RP) < 2e-5  # measured 2.4e-6 – 3.6e-6; the issue's bound is 1e-4
     # behind the face (inside the arc's circle): zero in both
     h = pymust.getparam("C5-2v").getElementPositions()[3][0, 0] if name == "C5-2v" else \
         p.getElementPositions()[3][0, 0]
@@ -76,7 +76,7 @@ def test_pfield_matches_pymust(name, tx):
         y = np.full_like(x, 1.2e-3)
         RP3, _, _ = pymust.pfield(x, y, z, d, copy.deepcopy(p))
         rp3, _, _ = sf.pfield(x, y, z, d, p)
-        assert nrms(rp3, RP3) < 1e-4
+        assert nrms(rp3, RP3) < 2e-5
 
 
 @pytest.mark.parametrize("name", ["C5-2v", "P4-2v-r30"])
@@ -93,12 +93,12 @@ def test_simus_matches_pymust(name, tx):
     RF, _ = pymust.simus(xs, zs, rc, d, copy.deepcopy(p))
     rf, _ = sf.simus(xs, zs, rc, d, p)
     assert rf.shape == RF.shape
-    assert nrms(rf, RF) < 1e-4
+    assert nrms(rf, RF) < 6e-5  # measured 1.5e-5 – 2.2e-5 (float32 RF); the issue's bound is 1e-4
     if tx == "zero":
         ys = rng.uniform(-2e-3, 2e-3, n)
         RF3, _ = pymust.simus(xs, ys, zs, rc, d, copy.deepcopy(p))
         rf3, _ = sf.simus(xs, ys, zs, rc, d, p)
-        assert rf3.shape == RF3.shape and nrms(rf3, RF3) < 1e-4
+        assert rf3.shape == RF3.shape and nrms(rf3, RF3) < 6e-5
 
 
 def test_bad_convex_geometry_is_named():

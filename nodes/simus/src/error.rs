@@ -44,14 +44,6 @@ pub enum SimusError {
         /// Comma-separated list of supported names.
         known: &'static str,
     },
-    /// A convex array where a stage does not support one yet (`name` says which).
-    #[error("convex arrays are not supported by {name} yet (radius {radius} m); the batch tools and the Python package simulate and beamform them")]
-    ConvexNotSupported {
-        /// Probe name.
-        name: String,
-        /// Radius of curvature (m).
-        radius: f64,
-    },
     /// The elements of a convex array do not fit on less than half of its circle.
     #[error("invalid parameter `probe.n_elements` = {n_elements}: a convex array of radius {radius} m holds at most {max} elements at this pitch (the arc must span less than half the circle)")]
     ArcTooShort {

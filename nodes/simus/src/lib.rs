@@ -6,7 +6,7 @@
 //! `simus.m`/`pfield.m`, reproduced from PyMUST 0.1.9), written to match PyMUST to
 //! nRMS ≤ 1e-4 and to run far faster.
 //!
-//! A uniform linear array ([`Probe`]) transmits a windowed sine of `TXnow` cycles, shaped by the
+//! A uniform linear or convex array ([`Probe`]) transmits a windowed sine of `TXnow` cycles, shaped by the
 //! probe's one-way response (module [`pulse`]), with per-element delays and apodisation
 //! ([`Transmit`]). Each element is split into M sub-elements; in the far field of each
 //! sub-element the field is `obliquity · directivity · exp((−α + ik) r) / √r` (eq. 14–16, module

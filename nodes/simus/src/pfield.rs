@@ -233,7 +233,7 @@ impl ArrayGeom {
     /// convex array's arc), where the field is set to 0.
     #[inline(always)]
     pub fn is_behind(&self, x: f64, z: f64) -> bool {
-        z < 0.0 || self.arc.is_some_and(|(r, h)| x * x + (z + h) * (z + h) <= r * r)
+        crate::probe::behind_face(x, z, self.arc)
     }
 
     /// Offset (x, z) of sub-element `m` of element `e` from the element's centre.

@@ -1,4 +1,4 @@
-//! MUST's PFIELD: the RMS acoustic pressure field of one transmit of a linear array over a set
+//! MUST's PFIELD: the RMS acoustic pressure field of one transmit of a linear or convex array over a set
 //! of points in the x–z plane (2-D, the model SIMUS uses for its transmit path).
 //!
 //! For points p, elements e (split into M sub-elements m, [`crate::pfield`] geometry: clamped

@@ -66,7 +66,8 @@ fn default_tx_now() -> f64 {
     1.0
 }
 
-/// Uniform linear array. Field names follow MUST's `param` (aliases accept MUST's spelling).
+/// Uniform linear or convex array. Field names follow MUST's `param` (aliases accept MUST's
+/// spelling).
 ///
 /// In files, `fc`, `pitch`, `n_elements` and one of `width`/`kerf` are required; the other
 /// fields take MUST's defaults (bandwidth 75 %, soft baffle, `TXnow` 1, linear).
@@ -247,13 +248,7 @@ impl Probe {
     /// True when (x, z) lies behind the face of the array (MUST's `isOUT`): z < 0, or for a
     /// convex array inside or on the circle of the arc, `x² + (z + h)² ≤ R²`.
     pub fn is_behind(&self, x: f64, z: f64) -> bool {
-        match self.convex_radius() {
-            None => z < 0.0,
-            Some(r) => {
-                let h = self.apothem();
-                z < 0.0 || x * x + (z + h) * (z + h) <= r * r
-            }
-        }
+        behind_face(x, z, self.convex_radius().map(|r| (r, self.apothem())))
     }
 
     /// Checks every field; the error names the field and the allowed range.
@@ -301,6 +296,9 @@ impl Probe {
                 return Err(invalid("probe.radius", r, "> 0 (infinite = linear array)"));
             }
             if r.is_finite() {
+                if r > 1e6 {
+                    return Err(invalid("probe.radius", r, "<= 1e6 m when finite (inf or none: a linear array)"));
+                }
                 if self.pitch > 2.0 * r {
                     return Err(invalid("probe.pitch", self.pitch, "<= 2·radius on a convex array"));
                 }
@@ -324,6 +322,13 @@ pub struct ElementPosition {
     pub z: f64,
     /// Angle of the element's normal from the z axis (rad, positive towards +x).
     pub theta: f64,
+}
+
+/// MUST's `isOUT`: z < 0, or inside or on the circle (radius R, centre (0, −h)) of a convex
+/// array's arc (`arc` = (R, h); None for a linear array).
+#[inline(always)]
+pub(crate) fn behind_face(x: f64, z: f64, arc: Option<(f64, f64)>) -> bool {
+    z < 0.0 || arc.is_some_and(|(r, h)| x * x + (z + h) * (z + h) <= r * r)
 }
 
 /// Chord and apothem of the arc of N elements at `pitch` on a circle of radius `r` (MUST).

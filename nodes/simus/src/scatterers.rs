@@ -121,18 +121,23 @@ impl<'a> ScattererSlices<'a> {
     }
 
     /// Largest distance (m) from any scatterer to any element centre of `probe` (MUST's `maxD`
-    /// before the pulse length): [`Self::max_element_distance`] for a linear array, every
-    /// element for a convex one.
+    /// before the pulse length): [`Self::max_element_distance`] for a linear array. On a convex
+    /// array the distance from a point to the arc's points grows with their angle from the
+    /// point's direction seen from the circle's centre (0, −h), so for a point above the centre
+    /// (z > −h: the arc spans less than half the circle) the farthest element is an end one;
+    /// below it, every element is tried.
     pub fn max_probe_distance(&self, probe: &crate::Probe) -> f64 {
         let n = probe.n_elements;
         if probe.convex_radius().is_none() {
             return self.max_element_distance(probe.element_x(0), probe.element_x(n - 1));
         }
-        let pos = probe.element_positions();
+        let (pos, h) = (probe.element_positions(), probe.apothem());
+        let ends = [pos[0], pos[n - 1]];
         let mut d2max = 0.0f64;
         for (x, z) in self.x.iter().zip(self.z) {
             let (x, z) = (f64::from(*x), f64::from(*z));
-            for p in &pos {
+            let els: &[crate::ElementPosition] = if z > -h { &ends } else { &pos };
+            for p in els {
                 d2max = d2max.max((x - p.x) * (x - p.x) + (z - p.z) * (z - p.z));
             }
         }

@@ -174,3 +174,28 @@ fn impossible_geometry_is_named() {
     assert!(e.contains("focus z0") && e.contains("in front of the convex"), "{e}");
     assert!(Transmit::focused(&c5(), 1540.0, 0.0, 0.03).is_ok());
 }
+
+/// MUST's maximum element distance (the frequency step) over every element equals the
+/// shortcut through the end elements for points above the circle's centre, and is found for
+/// points below it too (scatterers far behind the probe are legal, silent input).
+#[test]
+fn max_distance_over_the_arc() {
+    use sonoflow_simus::Scatterers;
+    let probe = c5();
+    let pos = probe.element_positions();
+    let h = probe.apothem();
+    let pts: Vec<(f32, f32)> = vec![
+        (0.0, 0.05),
+        (0.03, 0.001),
+        (-0.08, 0.02),
+        (0.01, -0.02),
+        (0.0, (-h - 0.03) as f32),
+        (0.02, (-h - 0.1) as f32),
+    ];
+    for &(x, z) in &pts {
+        let s = Scatterers::new(vec![x], vec![z], vec![1.0]).unwrap();
+        let brute = pos.iter().map(|p| (f64::from(x) - p.x).hypot(f64::from(z) - p.z)).fold(0.0, f64::max);
+        let got = s.as_slices().max_probe_distance(&probe);
+        assert!((got - brute).abs() <= 1e-15 * brute, "({x}, {z}): {got} vs {brute}");
+    }
+}

@@ -25,13 +25,13 @@
 //! | `c` (m/s) | — | optional (1540) | optional (1540) |
 //! | `pitch` (m) | — | required | — |
 //! | `Nelements` (`n_elements`, `nelements`) | — | optional (the I/Q's element count) | — |
-//! | `radius` (m) | — | optional (absent or inf: linear array; finite: convex, MUST's geometry) | — |
+//! | `radius` (m) | — | optional¹ (absent or inf: linear array; finite: convex, MUST's geometry) | — |
 //! | `fnumber` | — | optional (0 = full aperture, MUST) | — |
 //! | `RXangle` (`rx_angle`, `rxangle`, rad) | — | optional (0; `--rx-angle` wins) | — |
 //! | `interpolation` (`linear`/`nearest`) | — | optional (linear) | — |
 //! | `PRF` (`prf`, Hz) | — | — | required |
 //!
-//! ¹ When the parameter file lacks `fs`/`t0`, they are taken from the input's JSON sidecar
+//! ¹ When the parameter file lacks `fs`/`t0`/`radius`, they are taken from the input's JSON sidecar
 //! (`rf.json` written by `sonoflow simus`, `iq.json` written by `sonoflow rf2iq`), and the
 //! output line says so. `rf2iq --t0` overrides both.
 
@@ -313,6 +313,8 @@ pub fn run_rf2iq(a: &Rf2IqArgs) -> anyhow::Result<i32> {
     if !t0.is_finite() {
         anyhow::bail!("t0 = {t0} (from {t0_from}) is out of range: must be finite (s)");
     }
+    // a convex array's radius travels on to `das` through the sidecars
+    let radius = sidecar_f64(&side, "radius")?.map(|(r, _)| r);
     let params = Rf2IqParams { fc, fs, bandwidth: p.bandwidth, t0, order: 5 };
     let mut rf2iq = Rf2Iq::new(params.clone()).map_err(|e| anyhow::anyhow!("--param {}: {e}", a.param.display()))?;
     let start = std::time::Instant::now();
@@ -331,6 +333,7 @@ pub fn run_rf2iq(a: &Rf2IqArgs) -> anyhow::Result<i32> {
         "order": params.order,
         "n_samples": ns,
         "n_elements": ne,
+        "radius": radius,
         "layout": "npy complex64 shape (n_samples, n_elements), sample k at t0 + k/fs",
         "seconds": secs,
     });
@@ -419,6 +422,25 @@ pub fn run_das(a: &DasArgs) -> anyhow::Result<i32> {
     let side_t0 = sidecar_f64(&side, "t0")?;
     warn_disagreement("t0", p.t0, &side_t0);
     let (t0, t0_from) = pick(p.t0, side_t0).unwrap_or((0.0, "default".into()));
+    // the radius: --param's (inf = linear), else the sidecar's (written by simus → rf2iq)
+    let side_radius = sidecar_f64(&side, "radius")?;
+    let radius = match (p.radius, &side_radius) {
+        (Some(r), _) => {
+            let (param_r, side_r) = (Some(r).filter(|r| *r != f64::INFINITY), side_radius.as_ref().map(|s| s.0));
+            if param_r != side_r && side.is_some() {
+                eprintln!(
+                    "warning: `radius` = {r} in --param differs from the sidecar's ({}); using {r}",
+                    side_r.map_or("linear".to_string(), |v| v.to_string())
+                );
+            }
+            param_r
+        }
+        (None, Some((r, name))) => {
+            eprintln!("convex array: radius {r} m from the sidecar {name}");
+            Some(*r)
+        }
+        (None, None) => None,
+    };
     let params = DasParams {
         fc: need(p.fc, "fc", "centre frequency, Hz", &a.param)?,
         c: p.c.unwrap_or(1540.0),
@@ -426,7 +448,7 @@ pub fn run_das(a: &DasArgs) -> anyhow::Result<i32> {
         t0,
         pitch: need(p.pitch, "pitch", "element pitch, m", &a.param)?,
         n_elements,
-        radius: p.radius.filter(|r| !(r.is_infinite() && *r > 0.0)),
+        radius,
         fnumber: p.fnumber.unwrap_or(0.0),
         rx_angle,
         interpolation: p.interpolation.unwrap_or_default(),

@@ -1,5 +1,5 @@
 //! `sonoflow pfield`: MUST's PFIELD as a batch tool, a thin wrapper of
-//! `sonoflow_simus::pfield_3d`: the RMS pressure field of one transmit of a linear array on a
+//! `sonoflow_simus::pfield_3d`: the RMS pressure field of one transmit of a linear or convex array on a
 //! rectangular grid (in the imaging plane, or at an elevation `--y` off it) → float64 `.npy` of shape (nz, nx) and a JSON sidecar (grid, transmit,
 //! frequency band); optionally a PNG of the field in dB.
 

@@ -165,6 +165,7 @@ pub fn run_simus(a: &SimusArgs) -> anyhow::Result<i32> {
         "t0": rf.t0,
         "n_samples": rf.n_samples,
         "n_elements": n_el,
+        "radius": simus.probe().convex_radius(),
         "layout": "npy shape (n_samples, n_elements), sample k at t0 + k/fs",
         "plan": rf.plan,
         "band_hz": [rf.plan.frequency(rf.plan.band_first), rf.plan.frequency(rf.plan.band_last)],

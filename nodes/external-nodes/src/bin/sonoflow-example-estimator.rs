@@ -145,6 +145,15 @@ fn estimate(kit: &mut Kit, ports: &mut Ports, pairs: BTreeMap<(u64, u64), Pair>,
             )
             .into());
         }
+        if h.radius.is_finite() && h.radius > 0.0 {
+            return Err(format!(
+                "packet {}: the looks come from a convex array (radius {} m): their receive angles are taken from \
+                 each element's normal, which this example's nominal plane-wave projection does not model \
+                 (use the built-in `doppler` node)",
+                h.packet, h.radius
+            )
+            .into());
+        }
         let vn = h.c * h.prf / (4.0 * h.fc * lag as f64);
         let a = [-(h.tx_angle.sin() + h.rx_angle.sin()) / 2.0, -(h.tx_angle.cos() + h.rx_angle.cos()) / 2.0];
         let mut planes = vec![0.0f32; 3 * n];

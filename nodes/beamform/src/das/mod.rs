@@ -50,10 +50,12 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::convex::{self, Convex};
+pub mod convex;
+
 use crate::error::{check_len, invalid, positive, BeamformError, Result};
 use crate::grid::Grid;
 use crate::C32;
+use convex::Convex;
 
 fn default_c() -> f64 {
     1540.0

@@ -10,7 +10,7 @@
 
 use std::f64::consts::PI;
 
-use crate::das::{spline_at, spline_second_derivatives, DasParams, TxWave};
+use super::{spline_at, spline_second_derivatives, DasParams, TxWave};
 use crate::error::{invalid, BeamformError, Result};
 use crate::grid::Grid;
 
@@ -106,12 +106,14 @@ pub(crate) fn validate_radius(p: &DasParams) -> Result<()> {
     if r > MAX_RADIUS {
         return Err(invalid("das.radius", r, "<= 1e6 m when finite (an infinite radius, or none, is a linear array)"));
     }
+    if p.pitch > 2.0 * r {
+        return Err(invalid("das.pitch", p.pitch, "<= 2·radius on a convex array (the pitch is a chord of the arc)"));
+    }
     let n_max = max_elements(p.pitch, r);
     if p.n_elements > n_max {
-        let why = if p.pitch > 2.0 * r { "pitch > 2·radius: " } else { "" };
         return Err(invalid(
             "das.n_elements",
-            format!("{} ({why}at most {n_max} elements of pitch {} m fit on radius {} m)", p.n_elements, p.pitch, r),
+            format!("{} (at most {n_max} elements of pitch {} m fit on radius {} m)", p.n_elements, p.pitch, r),
             "such that the arc spans less than half a circle: (N − 1)·asin(pitch/(2·radius)) < π/2",
         ));
     }
@@ -145,7 +147,8 @@ impl Convex {
         Some(Self { radius: r, h: apothem(p.pitch, p.n_elements, r), xe, ze, the, alpha })
     }
 
-    /// Errors if a grid pixel lies behind the face (inside or on the circle of the arc).
+    /// Errors if a grid pixel lies behind the face (MUST's isOUT: inside or on the circle of the
+    /// arc; z < 0 is refused for every array by [`Grid::validate`]).
     pub fn check_grid(&self, grid: &Grid) -> Result<()> {
         let (r, h) = (self.radius, self.h);
         // x² is convex in the column index: its minimum over a row is at one of these columns
