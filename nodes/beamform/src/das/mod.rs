@@ -844,15 +844,7 @@ impl RowCtx<'_> {
                     } else {
                         0.0
                     };
-                    let aw = if hann {
-                        let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
-                        c * c
-                    } else {
-                        1.0
-                    };
-                    let (s, c) = sincos_fast(wc * tau);
-                    let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
-                    *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, dz * inv_d];
+                    *g = tap_geometry(tau, u, hann, wc, (t0, fs), (dx, dz, d));
                 }
             } else {
                 // geometry, apodisation and phase (f64, branch-free)
@@ -867,15 +859,7 @@ impl RowCtx<'_> {
                     } else {
                         0.0
                     };
-                    let aw = if hann {
-                        let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
-                        c * c
-                    } else {
-                        1.0
-                    };
-                    let (s, c) = sincos_fast(wc * tau);
-                    let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
-                    *g = [(tau - t0) * fs, aw, c, s, dx * inv_d, z * inv_d];
+                    *g = tap_geometry(tau, u, hann, wc, (t0, fs), (dx, z, d));
                 }
             }
             // the taps: I/Q index and f32 weights (linear or nearest), on the trace or not
@@ -932,6 +916,23 @@ impl RowCtx<'_> {
             sink(ix, PixelTaps { index: &index[..n], w0: &w0[..n], w1: &w1[..n], gradient });
         }
     }
+}
+
+/// One tap's geometry `[fractional sample, apodisation weight, cos, sin of the phase, receive
+/// direction x, z]` from its delay `tau`, its position `u` across the aperture, the Hann switch,
+/// ω_c, (t0, fs) and the element → pixel vector `(dx, dz)` of length `d` (branch-free; the same
+/// operations for linear and convex arrays).
+#[inline(always)]
+fn tap_geometry(tau: f64, u: f64, hann: bool, wc: f64, (t0, fs): (f64, f64), (dx, dz, d): (f64, f64, f64)) -> [f64; 6] {
+    let aw = if hann {
+        let c = sincos_fast(std::f64::consts::PI * u.clamp(-0.5, 0.5)).1;
+        c * c
+    } else {
+        1.0
+    };
+    let (s, c) = sincos_fast(wc * tau);
+    let inv_d = if d > 0.0 { 1.0 / d } else { 0.0 };
+    [(tau - t0) * fs, aw, c, s, dx * inv_d, dz * inv_d]
 }
 
 /// One pixel's taps as [`RowCtx::walk`] hands them over.
