@@ -14,13 +14,14 @@ fn evaluation(dir: &std::path::Path) -> Evaluation {
 }
 
 /// A plug band translating at 0.5 m/s along 20° on a 0.1 mm grid: the bias of each component
-/// (gain − 1 over the image) stays below 2 % of the displacement at lags 10 and 16 (4.7, 7.5 px
-/// lateral per pair) and at lag 12 on a second seed. Measured gains x / z: lag 10 1.012 / 1.015, lag 12
-/// 1.013 / 0.990 (seeds 1–3: x +0.9 … +1.4 %, z −0.9 … −1.1 %), lag 16 0.998 / 1.009; shorter lags
-/// are worse (lag 8 0.966, lag 4 1.071 in x: docs/nodes.md, "speckle-tracking").
+/// (gain − 1 over the image) stays below 2 % of the displacement at the default lag 10 (4.7 px
+/// lateral per pair) on seeds 1 and 3 and at lag 12 on seed 2. Measured gains x / z: lag 10
+/// seeds 1–3 1.011 … 1.012 / 1.015 … 1.018, lag 12 1.013 / 0.990 (seeds 1–3: x +0.9 … +1.4 %,
+/// z −0.9 … −1.1 %), lag 16 0.998 / 1.009; shorter lags are worse (lag 8 0.966, lag 4 1.071 in x:
+/// docs/nodes.md, "speckle-tracking").
 #[test]
 fn rigid_translation_bias_is_below_two_percent() {
-    for (seed, lag) in [(1, 10), (1, 16), (2, 12)] {
+    for (seed, lag) in [(1, 10), (3, 10), (2, 12)] {
         let dir = tempfile::tempdir().unwrap();
         let (seed_s, lag_s) = (format!("flow.seed={seed}"), format!("doppler.lag={lag}"));
         run_graph_ok("tests/launch/plug-speckle.toml", dir.path(), &["--set", &seed_s, "--set", &lag_s]);
@@ -34,7 +35,7 @@ fn rigid_translation_bias_is_below_two_percent() {
 }
 
 /// `--swap doppler=speckle` on the quickstart: the vector field and the axial map carry the
-/// speckle tracker's planes, and its errors (measured: raw x |e|₇₅ 7.4 %, z 4.1 % of v_max; the
+/// speckle tracker's planes, and its errors (measured: raw x |e|₇₅ 6.3 %, z 4.0 % of v_max; the
 /// autocorrelation estimator's raw x is 24.7 %) stay under bounds that twice today's fails.
 #[test]
 fn quickstart_speckle_tracking_measures_the_vessel() {
@@ -55,16 +56,16 @@ fn quickstart_speckle_tracking_measures_the_vessel() {
     let ev = evaluation(dir.path());
     let raw = &ev.overall["raw"];
     println!("quickstart speckle: x |e|75 {:.4}, z {:.4}", raw.x.abs_p75, raw.z.abs_p75);
-    assert!(raw.x.abs_p75 < 0.12 && raw.z.abs_p75 < 0.07, "{raw:?}");
+    assert!(raw.x.abs_p75 < 0.11 && raw.z.abs_p75 < 0.07, "{raw:?}");
     assert!(raw.no_estimate * 20 < raw.pixels, "{raw:?}");
 }
 
-/// The rotating disk (not used to choose the defaults): measured raw x |e|₇₅ 3.6 %, z 4.8 %.
+/// The rotating disk (not used to choose the defaults): measured raw x |e|₇₅ 4.0 %, z 3.9 %.
 #[test]
 fn rotating_disk_speckle_tracking() {
     let dir = tempfile::tempdir().unwrap();
     run_graph_ok("launch/rotating-disk.toml", dir.path(), &["--swap", "doppler=speckle"]);
     let raw = &evaluation(dir.path()).overall["raw"];
     println!("rotating disk speckle: x |e|75 {:.4}, z {:.4}", raw.x.abs_p75, raw.z.abs_p75);
-    assert!(raw.x.abs_p75 < 0.06 && raw.z.abs_p75 < 0.08, "{raw:?}");
+    assert!(raw.x.abs_p75 < 0.06 && raw.z.abs_p75 < 0.07, "{raw:?}");
 }

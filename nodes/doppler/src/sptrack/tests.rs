@@ -89,8 +89,8 @@ fn iq_images_and_several_looks_are_tracked() {
 
 #[test]
 fn the_assembler_turns_pixels_into_metres_per_second() {
-    // 0.45 px/frame down and 0.3 px/frame right on a 0.1 × 0.2 mm grid at 5 kHz (lag 8:
-    // 3.6 and 2.4 px): vz = 0.45·0.1e-3·5000 = 0.225 m/s, vx = 0.3·0.2e-3·5000 = 0.3 m/s.
+    // 0.45 px/frame down and 0.3 px/frame right on a 0.1 × 0.2 mm grid at 5 kHz (default lag 10:
+    // 4.5 and 3 px): vz = 0.45·0.1e-3·5000 = 0.225 m/s, vx = 0.3·0.2e-3·5000 = 0.3 m/s.
     let (nz, nx, frames) = (64, 64, 16);
     let imgs = translating(11, nz, nx, frames, 0.45, 0.3);
     let grid = Grid { x0: -3e-3, z0: 10e-3, dx: 0.2e-3, dz: 0.1e-3, nx, nz };
