@@ -309,9 +309,22 @@ fn an_interrupted_sweep_stops_and_writes_what_it_has() {
     assert_eq!(status.code(), Some(130), "{err}");
     assert!(err.contains("sweep: interrupted during point"), "{err}");
     assert!(!err.contains("sweep: point 4/4"), "no point starts after the interrupt: {err}");
+    // The table lists every point: those that ran, and the rest as not run (which
+    // `sweep collect --resume` runs).
     let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
-    let rows = csv.lines().skip(1).count();
-    assert!((1..4).contains(&rows), "{csv}");
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    let not_run = rows.iter().filter(|r| r.contains(",\"not run\",")).count();
+    assert!((1..4).contains(&not_run), "{csv}");
+    assert!(err.contains("--resume"), "{err}");
+    // `collect --resume` runs what the interrupt left (the interrupted point again, its first
+    // attempt kept) and the table is complete.
+    let out = Command::new(bin()).args(["sweep", "collect"]).arg(dir.path()).arg("--resume").output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let csv = std::fs::read_to_string(dir.path().join("sweep.csv")).unwrap();
+    assert_eq!(csv.lines().skip(1).filter(|r| r.contains(",\"ok\",")).count(), 4, "{csv}");
+    assert!(dir.path().join("point-000").join("exit.json").exists());
 }
 
 /// `sonoflow sweep --seeds`: every setting once per realisation, and the table over realisations

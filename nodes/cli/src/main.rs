@@ -70,7 +70,7 @@ enum Cmd {
     /// Speckle phantom (MUST `genscat`, seeded, with inclusions) → scatterers .npy (n, 3) for `simus`.
     Genscat(sonoflow_tools::simus::GenscatArgs),
     /// Run a scene over a grid of settings; error (from its evaluator) against run time, Pareto front.
-    Sweep(sonoflow_tools::sweep::SweepArgs),
+    Sweep(sonoflow_tools::sweep::SweepCmd),
     /// Smoothn batch tool: robust unsupervised smoothing of a (components, ny, nx) or (ny, nx) .npy field.
     Smoothn(sonoflow_tools::smoothn::SmoothnArgs),
     /// RF → I/Q batch tool: (n_samples, n_elements) RF .npy + MUST parameters → complex64 I/Q .npy.

@@ -8,16 +8,69 @@
 //! them. Writes `sweep.csv` (all points), `sweep.md` (table, Pareto front marked; with seeds
 //! the table over realisations), `sweep-seeds.csv` (with seeds) and `sweep.svg` (error against
 //! compute time, Pareto front joined).
+//!
+//! Every sweep first writes its plan (`sweep-plan.json`: the launch file's text, the overrides
+//! and each point's settings), so that a point can run anywhere: here one after the other
+//! (`--executor local`, the default), or as the tasks of a Slurm job array (`--executor slurm`,
+//! [`slurm`]). `sonoflow sweep collect DIR` gathers whatever points have finished into the same
+//! tables, lists the failed and missing ones, and with `--resume` runs (or resubmits) only those.
 
-use sonoflow_launcher::launch::{self, Overrides};
+pub mod plan;
+pub mod slurm;
+
+use plan::Plan;
+use sonoflow_launcher::launch;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Arguments of `sonoflow sweep`.
+/// `sonoflow sweep`: a sweep (`sonoflow sweep FILE …`) or one of its subcommands.
+#[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct SweepCmd {
+    #[command(subcommand)]
+    pub sub: Option<SweepSub>,
+    #[command(flatten)]
+    pub args: SweepArgs,
+}
+
+/// Subcommands of `sonoflow sweep`.
+#[derive(clap::Subcommand, Debug)]
+pub enum SweepSub {
+    /// Gather the finished points of a sweep folder into sweep.csv / sweep.md / sweep.svg; list
+    /// the failed and missing points (exit status 1 if any).
+    Collect {
+        /// The sweep's output folder (it holds `sweep-plan.json`).
+        dir: PathBuf,
+        /// Run the failed and missing points again: resubmitted as a Slurm job array (only those
+        /// indices) for a Slurm sweep, run here for a local one. Points still queued or running
+        /// in Slurm are left alone. A failed point's folder is kept as `point-NNN.attempt-K`.
+        #[arg(long)]
+        resume: bool,
+        /// With `--resume` on a Slurm sweep: wait until the resubmitted tasks end, then collect.
+        #[arg(long)]
+        wait: bool,
+    },
+    /// Run point INDEX of the sweep in DIR (what each Slurm array task runs).
+    #[command(hide = true)]
+    Task { dir: PathBuf, index: usize },
+}
+
+/// Where the points of a sweep run.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Executor {
+    /// One after the other in this process's machine.
+    Local,
+    /// As the tasks of one Slurm job array (`sbatch --array`), each point in its own folder.
+    Slurm,
+}
+
+/// Arguments of `sonoflow sweep FILE`.
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
     /// Launch file; it must contain an `evaluator` node.
-    pub file: PathBuf,
+    #[arg(required = true)]
+    pub file: Option<PathBuf>,
     /// `node.param=a,b,c`: values to try (TOML values; commas inside [ ] or { } or quotes do not
     /// split). Repeat for a grid over several parameters.
     #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2,…")]
@@ -37,12 +90,38 @@ pub struct SweepArgs {
     /// Fixed `node=variant` for every run.
     #[arg(long = "swap", value_name = "NODE=VARIANT")]
     pub swap: Vec<String>,
-    /// Output folder (default `runs/<graph>-sweep-<time>`).
+    /// Output folder (default `runs/<graph>-sweep-<time>`). For Slurm it must be on a file
+    /// system that the compute nodes share.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Evaluated field whose error is plotted: `regularised` (default) or `raw`.
     #[arg(long, default_value = "regularised")]
     pub field: String,
+    /// Where the points run: `local` (one after the other here) or `slurm` (one job array,
+    /// submitted with `sbatch`; collect with `sonoflow sweep collect DIR`).
+    #[arg(long, value_enum, default_value = "local")]
+    pub executor: Executor,
+    /// Slurm partition (`sbatch --partition`); default: the cluster's default partition.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Slurm time limit of each task (`sbatch --time`, e.g. `30:00`, `2:00:00`); default: the
+    /// partition's.
+    #[arg(long)]
+    pub time: Option<String>,
+    /// CPUs of each Slurm task (`sbatch --cpus-per-task`, default 2: a graph is several
+    /// processes).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub cpus: Option<u32>,
+    /// Further `sbatch` option, passed as given (repeatable), e.g. `--sbatch=--account=lab`.
+    #[arg(long = "sbatch", value_name = "OPTION", allow_hyphen_values = true)]
+    pub sbatch: Vec<String>,
+    /// Slurm: wait until every task has ended (`sbatch --wait`), then collect.
+    #[arg(long, conflicts_with = "hold")]
+    pub wait: bool,
+    /// Slurm: submit the array held (`sbatch --hold`; start it with `scontrol release JOBID`).
+    /// Only this submission: `collect --resume` submits unheld.
+    #[arg(long)]
+    pub hold: bool,
 }
 
 /// Splits `a,b,[c,d],"e,f"` at top-level commas.
@@ -165,11 +244,6 @@ pub fn realisations(seeds: &[String]) -> anyhow::Result<Vec<Vec<String>>> {
     Ok((0..n).map(|k| columns.iter().map(|c| c[k].clone()).collect()).collect())
 }
 
-fn read_json(p: &Path) -> anyhow::Result<serde_json::Value> {
-    let text = std::fs::read_to_string(p).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
-    Ok(serde_json::from_str(&text)?)
-}
-
 /// Marks the points not dominated in (compute time, error).
 pub fn mark_pareto(points: &mut [Point]) {
     let ok: Vec<bool> = points.iter().map(|p| p.status == "ok" && p.error_rms.is_finite()).collect();
@@ -257,10 +331,34 @@ fn xml(t: &str) -> String {
     t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
-/// `sonoflow sweep`; `registry`: the node kinds the swept graph may use.
-pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
+/// `sonoflow sweep …`; `registry`: the node kinds the swept graph may use.
+pub fn run_sweep(cmd: &SweepCmd, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
+    match &cmd.sub {
+        Some(SweepSub::Collect { dir, resume, wait }) => collect(dir, *resume, *wait, registry),
+        Some(SweepSub::Task { dir, index }) => plan::run_task(dir, *index, registry),
+        None => start(&cmd.args, registry),
+    }
+}
+
+/// Plans a sweep, then runs it here or submits it to Slurm.
+fn start(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]) -> anyhow::Result<i32> {
+    let Some(file) = &a.file else { anyhow::bail!("sweep: give a launch file (or `sonoflow sweep collect DIR`)") };
     if a.field != "regularised" && a.field != "raw" {
         anyhow::bail!("--field {}: allowed regularised, raw", a.field);
+    }
+    if a.executor == Executor::Local {
+        for (given, opt) in [
+            (a.partition.is_some(), "--partition"),
+            (a.time.is_some(), "--time"),
+            (a.cpus.is_some(), "--cpus"),
+            (!a.sbatch.is_empty(), "--sbatch"),
+            (a.wait, "--wait"),
+            (a.hold, "--hold"),
+        ] {
+            if given {
+                anyhow::bail!("{opt} applies to Slurm sweeps only: add --executor slurm");
+            }
+        }
     }
     // The grid of settings.
     let mut axes: Vec<Vec<String>> = Vec::new();
@@ -284,32 +382,49 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
     }
     let reals = realisations(&a.seeds)?;
     // (setting index, settings of the run)
-    let runs: Vec<(usize, Vec<String>)> = if reals.is_empty() {
-        settings.iter().cloned().enumerate().collect()
+    let runs: Vec<plan::PlanRun> = if reals.is_empty() {
+        settings.iter().enumerate().map(|(g, c)| plan::PlanRun { group: g, settings: c.clone() }).collect()
     } else {
         let mut runs = Vec::new();
         for (g, c) in settings.iter().enumerate() {
-            runs.extend(reals.iter().map(|r| (g, [c.clone(), r.clone()].concat())));
+            runs.extend(reals.iter().map(|r| plan::PlanRun { group: g, settings: [c.clone(), r.clone()].concat() }));
         }
         runs
     };
-    let combos: Vec<Vec<String>> = runs.iter().map(|(_, c)| c.clone()).collect();
-    if combos.len() > 1000 {
-        anyhow::bail!("--vary × --seeds: {} runs; at most 1000", combos.len());
+    if runs.len() > 1000 {
+        anyhow::bail!("--vary × --seeds: {} runs; at most 1000", runs.len());
     }
+    let launch_file = std::path::absolute(file).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+    let launch_text =
+        std::fs::read_to_string(&launch_file).map_err(|e| anyhow::anyhow!("{}: {e}", launch_file.display()))?;
+    let mut plan = Plan {
+        version: plan::PLAN_VERSION,
+        launch_file,
+        launch_text,
+        set: a.set.clone(),
+        swap: a.swap.clone(),
+        label: a.label.clone(),
+        field: a.field.clone(),
+        graph: String::new(),
+        seeds: a.seeds.clone(),
+        settings,
+        runs,
+        executor: a.executor,
+        slurm: (a.executor == Executor::Slurm).then(|| slurm::SlurmOptions {
+            partition: a.partition.clone(),
+            time: a.time.clone(),
+            cpus: a.cpus.unwrap_or(2),
+            sbatch: a.sbatch.clone(),
+        }),
+        jobs: Vec::new(),
+    };
     // Check every combination before running any.
-    let mut graphs = Vec::new();
     let mut errors = Vec::new();
-    for c in &combos {
-        let ov = Overrides {
-            set: [a.set.clone(), c.clone()].concat(),
-            swap: a.swap.clone(),
-            lenient_files: false,
-            ..Default::default()
-        };
-        match launch::load(&a.file, &ov, registry) {
+    let mut graphs = Vec::new();
+    for k in 0..plan.runs.len() {
+        match plan.graph(k, registry) {
             Ok(g) => graphs.push(g),
-            Err(e) => errors.extend(e.into_iter().map(|e| format!("[{}] {e}", c.join(", ")))),
+            Err(e) => errors.extend(e.into_iter().map(|e| format!("[{}] {e}", plan.runs[k].settings.join(", ")))),
         }
     }
     if !errors.is_empty() {
@@ -319,96 +434,160 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
         eprintln!("{} problem(s) found; nothing was run", errors.len());
         return Ok(2);
     }
-    let name = graphs.first().map(|g| g.graph.name.clone()).unwrap_or_default();
+    plan.graph = graphs.first().map(|g| g.graph.name.clone()).unwrap_or_default();
     if !graphs
         .iter()
         .all(|g| g.nodes.iter().any(|n| matches!(&n.program, launch::Program::Builtin(k) if k == "evaluator")))
     {
-        anyhow::bail!("{}: a sweep needs an `evaluator` node in the graph (it measures the error)", a.file.display());
+        anyhow::bail!("{}: a sweep needs an `evaluator` node in the graph (it measures the error)", file.display());
     }
-    let out = a.out.clone().unwrap_or_else(|| sonoflow_launcher::supervise::default_out_dir(&format!("{name}-sweep")));
+    drop(graphs);
+    if a.executor == Executor::Slurm {
+        slurm::check_client()?;
+    }
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| sonoflow_launcher::supervise::default_out_dir(&format!("{}-sweep", plan.graph)));
     std::fs::create_dir_all(&out).map_err(|e| anyhow::anyhow!("creating {}: {e}", out.display()))?;
-    let mut points = Vec::new();
-    let total = graphs.len();
-    for (k, (g, c)) in graphs.iter().zip(&combos).enumerate() {
-        let dir = out.join(format!("point-{k:03}"));
-        let opts = sonoflow_launcher::supervise::RunOptions {
-            out_dir: dir.clone(),
-            run_id: sonoflow_launcher::supervise::new_run_id(&name),
-            quiet: true,
-        };
-        eprintln!("sweep: point {}/{total}: {}", k + 1, c.join(", "));
-        let code = sonoflow_launcher::run_graph(g, &opts)?;
-        let mut p = Point {
-            index: k,
-            settings: c.clone(),
-            status: if code == 0 { "ok".into() } else { format!("failed (exit {code})") },
-            compute_s: f64::NAN,
-            wall_s: f64::NAN,
-            error_rms: f64::NAN,
-            x_abs_p75: f64::NAN,
-            z_abs_p75: f64::NAN,
-            x_gain: f64::NAN,
-            z_gain: f64::NAN,
-            pareto: false,
-            group: runs[k].0,
-        };
-        if let Ok(r) = read_json(&dir.join("report.json")) {
-            p.wall_s = r["wall_s"].as_f64().unwrap_or(f64::NAN);
-            p.compute_s = r["nodes"]
-                .as_array()
-                .map(|ns| ns.iter().filter_map(|n| n["stats"]["compute_ns_total"].as_f64()).sum::<f64>() / 1e9)
-                .unwrap_or(f64::NAN);
-        }
-        let eval_file = match &a.label {
-            Some(l) => format!("evaluation-{l}.json"),
-            None => "evaluation.json".to_string(),
-        };
-        match read_json(&dir.join(&eval_file)) {
-            Ok(e) => {
-                let fields: Vec<&serde_json::Value> = e["packets"]
-                    .as_array()
-                    .map(|ps| ps.iter().filter_map(|p| p["fields"].get(&a.field)).collect())
-                    .unwrap_or_default();
-                if !fields.is_empty() {
-                    let mean = |f: &dyn Fn(&serde_json::Value) -> f64| {
-                        fields.iter().map(|v| f(v)).sum::<f64>() / fields.len() as f64
-                    };
-                    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
-                    p.error_rms = mean(&|v| num(&v["x"]["rms"]).hypot(num(&v["z"]["rms"])));
-                    p.x_abs_p75 = mean(&|v| num(&v["x"]["abs_p75"]));
-                    p.z_abs_p75 = mean(&|v| num(&v["z"]["abs_p75"]));
-                    p.x_gain = mean(&|v| num(&v["gain_x"]));
-                    p.z_gain = mean(&|v| num(&v["gain_z"]));
-                } else if p.status == "ok" {
-                    p.status = format!("no `{}` field evaluated", a.field);
+    let out = out.canonicalize()?;
+    if out.join(plan::PLAN_FILE).exists() {
+        anyhow::bail!(
+            "{} already holds a sweep: gather it with `sonoflow sweep collect {}` (--resume runs what is missing), or choose another --out",
+            out.display(),
+            out.display()
+        );
+    }
+    plan.save(&out)?;
+    let total = plan.runs.len();
+    match a.executor {
+        Executor::Local => {
+            for k in 0..total {
+                eprintln!("sweep: point {}/{total}: {}", k + 1, plan.runs[k].settings.join(", "));
+                plan::run_point(&plan, &out, k, registry)?;
+                let p = plan::read_point(&plan, &out, k, &Default::default());
+                eprintln!(
+                    "sweep: point {}/{total}: {} — error {:.2} % of v_max, compute {:.2} s, wall {:.2} s",
+                    k + 1,
+                    p.status,
+                    100.0 * p.error_rms,
+                    p.compute_s,
+                    p.wall_s
+                );
+                if sonoflow_launcher::supervise::interrupted() {
+                    eprintln!(
+                        "sweep: interrupted during point {}/{total}: the {} point(s) run so far are written, the rest not run (`sonoflow sweep collect {} --resume` runs them)",
+                        k + 1,
+                        k + 1,
+                        out.display()
+                    );
+                    break;
                 }
             }
-            Err(e) if p.status == "ok" => p.status = format!("no evaluation: {e}"),
-            Err(_) => {}
+            let code = report(&out, &plan, &Default::default())?;
+            Ok(if sonoflow_launcher::supervise::interrupted() { 130 } else { code })
         }
-        eprintln!(
-            "sweep: point {}/{total}: {} — error {:.2} % of v_max, compute {:.2} s, wall {:.2} s",
-            k + 1,
-            p.status,
-            100.0 * p.error_rms,
-            p.compute_s,
-            p.wall_s
-        );
-        points.push(p);
-        if sonoflow_launcher::supervise::interrupted() {
-            eprintln!(
-                "sweep: interrupted during point {}/{total}: the {} point(s) run so far are written, the rest not run",
-                k + 1,
-                points.len()
+        Executor::Slurm => {
+            let all: Vec<usize> = (0..total).collect();
+            let job = slurm::submit(&out, &mut plan, &all, a.wait, a.hold)?;
+            if a.wait {
+                return collect(&out, false, false, registry);
+            }
+            println!(
+                "sweep: {total} point(s) submitted as Slurm job array {job}; when they have run: sonoflow sweep collect {}",
+                out.display()
             );
-            break;
+            Ok(0)
         }
     }
-    mark_pareto(&mut points);
+}
+
+/// `sonoflow sweep collect DIR [--resume [--wait]]`.
+fn collect(
+    dir: &Path,
+    resume: bool,
+    wait: bool,
+    registry: &'static [sonoflow_node_kit::KindSpec],
+) -> anyhow::Result<i32> {
+    let mut plan = Plan::load(dir)?;
+    if wait && !(resume && plan.executor == Executor::Slurm) {
+        anyhow::bail!("--wait applies to `collect --resume` of a Slurm sweep only");
+    }
+    let active = match plan.executor {
+        Executor::Slurm => slurm::active(&plan.jobs).unwrap_or_else(|e| {
+            eprintln!("sweep collect: warning: cannot ask Slurm which tasks are still queued or running ({e}); every point without a result counts as missing");
+            Default::default()
+        }),
+        Executor::Local => Default::default(),
+    };
+    if resume {
+        let todo: Vec<usize> = (0..plan.runs.len())
+            .filter(|k| !active.contains(k) && plan::read_point(&plan, dir, *k, &active).status != "ok")
+            .collect();
+        if todo.is_empty() {
+            eprintln!("sweep collect: nothing to resume: every point has run (or is still queued or running)");
+        } else {
+            match plan.executor {
+                Executor::Local => {
+                    for (i, &k) in todo.iter().enumerate() {
+                        eprintln!(
+                            "sweep: resuming point {} ({}/{}): {}",
+                            k,
+                            i + 1,
+                            todo.len(),
+                            plan.runs[k].settings.join(", ")
+                        );
+                        plan::run_point(&plan, dir, k, registry)?;
+                        if sonoflow_launcher::supervise::interrupted() {
+                            break;
+                        }
+                    }
+                }
+                Executor::Slurm => {
+                    let job = slurm::submit(dir, &mut plan, &todo, wait, false)?;
+                    let list: Vec<String> = todo.iter().map(usize::to_string).collect();
+                    eprintln!("sweep collect: point(s) {} resubmitted as Slurm job array {job}", list.join(", "));
+                    if !wait {
+                        println!("sweep: when they have run: sonoflow sweep collect {}", dir.display());
+                        return Ok(0);
+                    }
+                }
+            }
+        }
+        let active = match plan.executor {
+            Executor::Slurm => slurm::active(&plan.jobs).unwrap_or_default(),
+            Executor::Local => Default::default(),
+        };
+        return report(dir, &plan, &active);
+    }
+    report(dir, &plan, &active)
+}
+
+/// Gathers the points, writes the tables and the figure, lists what is not done; exit status 0
+/// when every point ran and was evaluated, else 1.
+fn report(dir: &Path, plan: &Plan, active: &std::collections::BTreeSet<usize>) -> anyhow::Result<i32> {
+    let mut points: Vec<Point> = (0..plan.runs.len()).map(|k| plan::read_point(plan, dir, k, active)).collect();
+    write_outputs(dir, plan, &mut points)?;
+    let bad: Vec<&Point> = points.iter().filter(|p| p.status != "ok").collect();
+    if !bad.is_empty() {
+        eprintln!("sweep: {} of {} point(s) not done:", bad.len(), points.len());
+        for p in &bad {
+            eprintln!("  point {} ({}): {}", p.index, p.settings.join(", "), p.status);
+        }
+        if bad.iter().any(|p| !active.contains(&p.index)) {
+            eprintln!("  run them again with: sonoflow sweep collect {} --resume", dir.display());
+        }
+    }
+    Ok(if bad.is_empty() { 0 } else { 1 })
+}
+
+/// Writes `sweep.csv`, `sweep.md`, `sweep-seeds.csv` (with seeds) and `sweep.svg` into `out`.
+fn write_outputs(out: &Path, plan: &Plan, points: &mut [Point]) -> anyhow::Result<()> {
+    let name = &plan.graph;
+    mark_pareto(points);
     let mut csv =
         String::from("index,settings,status,compute_s,wall_s,error_rms,x_abs_p75,z_abs_p75,x_gain,z_gain,pareto\n");
-    for p in &points {
+    for p in points.iter() {
         let _ = writeln!(
             csv,
             "{},\"{}\",\"{}\",{},{},{},{},{},{},{},{}",
@@ -430,9 +609,9 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
         "# Sweep of `{}` ({} points, field `{}`)\n\nError = RMS vector error / v_max, mean over packets; ★ = Pareto front (no other point is both faster and more accurate).\n\n| # | settings | status | compute CPU (s) | wall (s) | error | x \\|e\\|₇₅ | z \\|e\\|₇₅ | |\n|---:|---|---|---:|---:|---:|---:|---:|---|\n",
         name,
         points.len(),
-        a.field
+        plan.field
     );
-    for p in &points {
+    for p in points.iter() {
         let _ = writeln!(
             md,
             "| {} | {} | {} | {:.2} | {:.2} | {:.2} % | {:.1} % | {:.1} % | {} |",
@@ -447,14 +626,15 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
             if p.pareto { "★" } else { "" }
         );
     }
-    if !reals.is_empty() {
-        let sp = spreads(&points, &settings);
+    if !plan.seeds.is_empty() {
+        let n_reals = realisations(&plan.seeds)?.len();
+        let sp = spreads(points, &plan.settings);
         let pm = |(m, sd): (f64, f64)| format!("{:.2} ± {:.2} %", 100.0 * m, 100.0 * sd);
         let _ = write!(
             md,
             "\n## Over {} realisations ({})\n\nMean ± sample standard deviation over the realisations of each setting (x, z |e|₇₅: mean over packets, % of v_max).\n\n| settings | n | x \\|e\\|₇₅ | z \\|e\\|₇₅ | error | compute CPU (s) |\n|---|---:|---:|---:|---:|---:|\n",
-            reals.len(),
-            a.seeds.join("; ")
+            n_reals,
+            plan.seeds.join("; ")
         );
         let mut scsv = String::from("settings,n,x_abs_p75_mean,x_abs_p75_sd,z_abs_p75_mean,z_abs_p75_sd,error_rms_mean,error_rms_sd,compute_s_mean\n");
         for s in &sp {
@@ -494,16 +674,10 @@ pub fn run_sweep(a: &SweepArgs, registry: &'static [sonoflow_node_kit::KindSpec]
     sonoflow_fileio::write_atomic(&out.join("sweep.md"), md.as_bytes())?;
     sonoflow_fileio::write_atomic(
         &out.join("sweep.svg"),
-        svg(&points, &format!("{name}: error against run time")).as_bytes(),
+        svg(points, &format!("{name}: error against run time")).as_bytes(),
     )?;
     println!("sweep: {} point(s) → {}", points.len(), out.join("sweep.md").display());
-    Ok(if sonoflow_launcher::supervise::interrupted() {
-        130
-    } else if points.iter().all(|p| p.status == "ok") {
-        0
-    } else {
-        1
-    })
+    Ok(())
 }
 
 #[cfg(test)]
