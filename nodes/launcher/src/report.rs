@@ -37,6 +37,9 @@ pub struct RunReport {
     /// PNG figures in `figures/` (paths relative to the run folder): the stage times, and the
     /// evaluator's when the graph has one. A figure that could not be drawn is a warning.
     pub figures: Vec<sonoflow_evaluate::figures::Figure>,
+    /// The stage with the most busy time (wall − waiting for input − held by back-pressure):
+    /// the one the others wait on.
+    pub critical_path: Option<String>,
 }
 
 /// The stage-time chart's rows: every node, compute CPU and wall time in seconds.
@@ -170,16 +173,16 @@ pub fn markdown(r: &RunReport) -> String {
     let _ = writeln!(s, "\n## Stages\n");
     let _ = writeln!(
         s,
-        "| node | program | exit | messages in | messages out | MB out | compute CPU (s) | ms / message | process CPU (s) | wall (s) |"
+        "| node | program | exit | messages in | messages out | MB out | compute CPU (s) | ms / message | process CPU (s) | wall (s) | waiting for input (s) | held by back-pressure (s) | busy |"
     );
-    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for n in &r.nodes {
         match &n.stats {
             Some(st) => {
                 let per = st.messages_in.max(st.messages_out).max(1) as f64;
                 let _ = writeln!(
                     s,
-                    "| {} | `{}` | {} | {} | {} | {:.1} | {:.3} | {:.3} | {:.3} | {:.2} |",
+                    "| {} | `{}` | {} | {} | {} | {:.1} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.0} % |",
                     n.name,
                     n.program,
                     n.exit,
@@ -189,18 +192,58 @@ pub fn markdown(r: &RunReport) -> String {
                     st.compute_ns_total as f64 / 1e9,
                     st.compute_ns_total as f64 / 1e6 / per,
                     st.cpu_ns as f64 / 1e9,
-                    st.wall_ns as f64 / 1e9
+                    st.wall_ns as f64 / 1e9,
+                    st.wait_input_ns as f64 / 1e9,
+                    st.wait_output_ns as f64 / 1e9,
+                    100.0 * busy_fraction(st)
                 );
             }
             None => {
-                let _ = writeln!(s, "| {} | `{}` | {} | – | – | – | – | – | – | – |", n.name, n.program, n.exit);
+                let _ = writeln!(
+                    s,
+                    "| {} | `{}` | {} | – | – | – | – | – | – | – | – | – | – |",
+                    n.name, n.program, n.exit
+                );
             }
         }
     }
     let _ = writeln!(
         s,
         "\nCompute CPU = thread CPU time spent producing messages (the per-message figure is also in every \
-         message header, `compute_ns`); process CPU includes start-up and waiting overhead. Logs: `logs/<node>.log`."
+         message header, `compute_ns`); process CPU includes start-up and waiting overhead. Waiting for input = \
+         wall time blocked until an upstream message arrived; held by back-pressure = wall time a send waited for \
+         a full downstream queue; busy = the rest of the stage's wall time (work, start-up, pacing). Logs: \
+         `logs/<node>.log`."
     );
+    if let Some(c) = critical_stage(r) {
+        let st = c.stats.as_ref().map(|st| (busy_fraction(st), st.wall_ns as f64 / 1e9)).unwrap_or((0.0, 0.0));
+        let _ = writeln!(
+            s,
+            "\n**Critical path:** `{}` — busy {:.0} % of its {:.1} s (the stage with the most busy time; the stages \
+             after it wait for its messages, those before it are held back by it).",
+            c.name,
+            100.0 * st.0,
+            st.1
+        );
+    }
     s
+}
+
+/// Share of a stage's wall time it was neither waiting for input nor held by back-pressure.
+pub fn busy_fraction(st: &NodeStats) -> f64 {
+    if st.wall_ns == 0 {
+        return 0.0;
+    }
+    let waits = st.wait_input_ns.saturating_add(st.wait_output_ns).min(st.wall_ns);
+    (st.wall_ns - waits) as f64 / st.wall_ns as f64
+}
+
+/// The stage with the most busy time (wall − waiting for input − back-pressure): the one the
+/// others wait on.
+pub fn critical_stage(r: &RunReport) -> Option<&NodeOutcome> {
+    r.nodes
+        .iter()
+        .filter_map(|n| n.stats.as_ref().map(|st| (n, st.wall_ns.saturating_sub(st.wait_input_ns + st.wait_output_ns))))
+        .max_by_key(|(_, busy)| *busy)
+        .map(|(n, _)| n)
 }

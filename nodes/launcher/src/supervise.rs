@@ -350,7 +350,9 @@ pub fn run_graph(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32
             })
             .collect(),
         figures: Vec::new(),
+        critical_path: None,
     };
+    report.critical_path = crate::report::critical_stage(&report).map(|n| n.name.clone());
     crate::report::add_figures(&out_dir, &mut report);
     crate::report::write(&out_dir, &report)?;
     for r in &report.recordings {

@@ -35,6 +35,7 @@ use sonoflow_messages::types::{StageStats, WireMessage};
 use sonoflow_messages::{MessageType, MsgHeaderV1, StageStatsHeaderV1, FLAG_END_OF_STREAM};
 pub use spec::{in_range, parse_params, port, KindSpec, PortDir, PortSpec, STATS_TOPIC};
 use std::mem::MaybeUninit;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// Node-kit errors.
@@ -299,7 +300,9 @@ impl<M: WireMessage> Output<M> {
             c.source_id = self.source_id;
         }
         *sample.user_header_mut() = header;
+        let t0 = Instant::now();
         sample.send().map_err(ipc(ctx.clone()))?;
+        add_output_wait(t0);
         self.notifier.notify().map_err(ipc(ctx))?;
         self.seq += 1;
         self.sent += 1;
@@ -370,7 +373,9 @@ impl<M: WireMessage> Output<M> {
         // SAFETY: every byte was written above.
         let mut sample = unsafe { sample.assume_init() };
         *sample.user_header_mut() = header;
+        let t0 = Instant::now();
         sample.send().map_err(ipc(ctx.clone()))?;
+        add_output_wait(t0);
         self.notifier.notify().map_err(ipc(ctx))?;
         self.seq = M::common(&header).seq + 1;
         self.sent += 1;
@@ -509,7 +514,10 @@ impl<M: WireMessage> Input<M> {
     /// interrupts the wait. Callers loop and check [`Kit::check_termination`]: a SIGTERM
     /// during the wait is reported there as [`KitError::Terminated`], not as a transport error.
     pub fn wait(&self, timeout: Duration) -> Result<(), KitError> {
-        match self.listener.timed_wait(|_| {}, timeout) {
+        let t0 = Instant::now();
+        let r = self.listener.timed_wait(|_| {}, timeout);
+        add_input_wait(t0);
+        match r {
             Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
             Err(e) => Err(ipc(format!("waiting on `{}`", self.services.qos.topic))(e)),
         }
@@ -555,6 +563,21 @@ impl<M: WireMessage> Handshake for Input<M> {
     }
 }
 
+/// Nanoseconds this process has spent blocked in [`Input::wait`] and [`select_loop`] (waiting for
+/// input) and in sending a message that a full subscriber queue held back (back-pressure);
+/// [`Kit::finish`] reports them.
+static WAIT_INPUT_NS: AtomicU64 = AtomicU64::new(0);
+static WAIT_OUTPUT_NS: AtomicU64 = AtomicU64::new(0);
+
+/// Adds the time since `t0` to the process's time spent waiting for input.
+pub(crate) fn add_input_wait(t0: Instant) {
+    WAIT_INPUT_NS.fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+}
+
+fn add_output_wait(t0: Instant) {
+    WAIT_OUTPUT_NS.fetch_add(t0.elapsed().as_nanos() as u64, Ordering::Relaxed);
+}
+
 /// Per-node counters reported at the end.
 #[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct NodeStats {
@@ -567,6 +590,12 @@ pub struct NodeStats {
     pub cpu_ns: u64,
     pub wall_ns: u64,
     pub gaps: u64,
+    /// Wall time blocked waiting for an input message (ns).
+    #[serde(default)]
+    pub wait_input_ns: u64,
+    /// Wall time blocked sending, held back by a full downstream queue (ns).
+    #[serde(default)]
+    pub wait_output_ns: u64,
 }
 
 /// Prefix of the one-line JSON statistics a node prints to stdout at the end (parsed by the
@@ -756,6 +785,8 @@ impl Kit {
     pub fn finish(mut self) -> Result<NodeStats, KitError> {
         self.stats.cpu_ns = process_cpu_ns();
         self.stats.wall_ns = self.started.elapsed().as_nanos() as u64;
+        self.stats.wait_input_ns = WAIT_INPUT_NS.load(Ordering::Relaxed);
+        self.stats.wait_output_ns = WAIT_OUTPUT_NS.load(Ordering::Relaxed);
         self.publish_stats(0, 0.0, 0, true)?;
         let line = serde_json::to_string(&self.stats).unwrap_or_default();
         println!("{STATS_LINE_PREFIX}{line}");

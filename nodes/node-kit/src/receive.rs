@@ -105,7 +105,10 @@ where
         if let Step::Done = body(kit)? {
             return Ok(SelectEnd::Done);
         }
-        let terminated = match waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout) {
+        let t0 = std::time::Instant::now();
+        let waited = waitset.wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, timeout);
+        crate::add_input_wait(t0);
+        let terminated = match waited {
             Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt) => true,
             Ok(_) => false,
             Err(e) => {
