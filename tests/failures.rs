@@ -210,3 +210,25 @@ fn replay_refuses_a_retired_wire_version_naming_it() {
     assert_ne!(out.status.code(), Some(0), "{err}");
     assert!(err.contains("RfFrameV1") && err.contains("retired") && err.contains("RfFrameV3"), "{err}");
 }
+
+/// A node's thread budget (`--set NODE.cpus=N`) reaches its process as `RAYON_NUM_THREADS` (and
+/// `SONOFLOW_THREADS`); a node without one gets neither (its rayon pool takes every CPU).
+#[test]
+fn a_thread_budget_reaches_the_node_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut l = Launcher::start("tests/launch/kill.toml", dir.path(), &["--set", "checker.cpus=3"]);
+    let checker = l.node_pid("checker");
+    let source = l.node_pid("source");
+    let env = |pid: i32| -> Vec<String> {
+        std::fs::read(format!("/proc/{pid}/environ"))
+            .unwrap()
+            .split(|b| *b == 0)
+            .map(|v| String::from_utf8_lossy(v).to_string())
+            .collect()
+    };
+    let (c, s) = (env(checker), env(source));
+    assert!(c.iter().any(|v| v == "RAYON_NUM_THREADS=3") && c.iter().any(|v| v == "SONOFLOW_THREADS=3"), "{c:?}");
+    assert!(!s.iter().any(|v| v.starts_with("SONOFLOW_THREADS=")), "{s:?}");
+    kill9(source);
+    let _ = l.finish();
+}

@@ -114,7 +114,11 @@ impl Launcher {
 
     /// Pid of a node from the launcher's "started node `NAME` … pid N" line.
     pub fn node_pid(&mut self, node: &str) -> i32 {
-        let l = self.wait_line(&format!("started node `{node}`"));
+        let needle = format!("started node `{node}`");
+        let l = match self.seen.iter().find(|l| l.contains(&needle)) {
+            Some(l) => l.clone(),
+            None => self.wait_line(&needle),
+        };
         l.rsplit(' ').next().unwrap().parse().unwrap()
     }
 

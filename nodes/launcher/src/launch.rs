@@ -110,6 +110,12 @@ pub struct NodeDecl {
     /// Alternatives.
     #[serde(default)]
     pub variants: BTreeMap<String, VariantDecl>,
+    /// Thread budget: worker threads of this node's process (1–1024; its rayon pool, through
+    /// `RAYON_NUM_THREADS`, and `SONOFLOW_THREADS` for external programs). Absent: every CPU of
+    /// the machine (an idle pool costs nothing, so a stage uses what the others leave idle).
+    /// `--set NODE.cpus=N` sets it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpus: Option<u32>,
 }
 
 /// A whole launch file.
@@ -142,6 +148,8 @@ pub struct ResolvedNode {
     pub inputs: BTreeMap<String, TopicQos>,
     pub outputs: BTreeMap<String, TopicQos>,
     pub is_recorder: bool,
+    /// Thread budget ([`NodeDecl::cpus`]); `None`: every CPU.
+    pub cpus: Option<u32>,
 }
 
 /// A checked graph ready to start.
@@ -291,6 +299,10 @@ pub fn resolve(
             continue;
         }
         match file.nodes.get_mut(parts[0]) {
+            Some(n) if parts.len() == 2 && parts[1] == "cpus" => match raw.trim().parse::<u32>() {
+                Ok(c) => n.cpus = Some(c),
+                Err(_) => errors.push(format!("--set {s}: cpus is a whole number of threads, 1 ..= 1024")),
+            },
             Some(n) => {
                 if let Err(e) = set_path(&mut n.params, &parts[1..], parse_value(raw)) {
                     errors.push(format!("--set {s}: {e}"));
@@ -347,6 +359,7 @@ pub fn resolve(
     struct Wiring {
         inputs: BTreeMap<String, String>,
         outputs: BTreeMap<String, String>,
+        cpus: Option<u32>,
     }
     let mut programs: BTreeMap<String, (Program, Option<&'static KindSpec>)> = BTreeMap::new();
     let mut wiring: BTreeMap<String, Wiring> = BTreeMap::new();
@@ -354,6 +367,11 @@ pub fn resolve(
     for (name, n) in &file.nodes {
         if !valid_name(name, "") {
             errors.push(format!("node `{name}`: names use letters, digits, `-` and `_` only"));
+        }
+        if let Some(c) = n.cpus {
+            if !(1..=1024).contains(&c) {
+                errors.push(format!("nodes.{name}.cpus = {c} is out of range: 1 ..= 1024 threads"));
+            }
         }
         let params = match serde_json::to_value(&n.params) {
             Ok(v) => v,
@@ -515,7 +533,7 @@ pub fn resolve(
             }
         }
         programs.insert(name.clone(), (program, spec));
-        wiring.insert(name.clone(), Wiring { inputs, outputs });
+        wiring.insert(name.clone(), Wiring { inputs, outputs, cpus: n.cpus });
         params_json.insert(name.clone(), params);
     }
 
@@ -645,6 +663,7 @@ pub fn resolve(
             inputs: q(&w.inputs),
             outputs: q(&w.outputs),
             is_recorder: spec.map(|s| s.records).unwrap_or(false),
+            cpus: w.cpus,
             name,
         });
     }
@@ -870,6 +889,19 @@ kind = "recorder"
         set_path(&mut t, &["a", "b"], 3.into()).unwrap();
         assert_eq!(t["a"]["b"], toml::Value::Integer(3));
         assert!(set_path(&mut t, &["a", "b", "c"], 1.into()).is_err());
+    }
+
+    #[test]
+    fn a_thread_budget_is_a_node_setting_not_a_parameter() {
+        let g = res(Overrides { set: vec!["stage.cpus=1".into()], ..Default::default() }).unwrap();
+        let stage = g.nodes.iter().find(|x| x.name == "stage").unwrap();
+        assert_eq!(stage.cpus, Some(1));
+        assert!(stage.params.get("cpus").is_none(), "not passed to the node's params");
+        assert_eq!(g.nodes.iter().find(|x| x.name == "src").unwrap().cpus, None, "default: every CPU");
+        let errs = res(Overrides { set: vec!["stage.cpus=0".into(), "src.cpus=two".into()], ..Default::default() })
+            .unwrap_err();
+        assert!(errs.iter().any(|e| e.contains("nodes.stage.cpus = 0 is out of range: 1 ..= 1024")), "{errs:?}");
+        assert!(errs.iter().any(|e| e.contains("--set src.cpus=two: cpus is a whole number")), "{errs:?}");
     }
 
     #[test]

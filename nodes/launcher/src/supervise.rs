@@ -176,6 +176,9 @@ pub fn run_graph(graph: &ResolvedGraph, opts: &RunOptions) -> anyhow::Result<i32
                 (c, p.display().to_string())
             }
         };
+        if let Some(c) = n.cpus {
+            cmd.env("RAYON_NUM_THREADS", c.to_string()).env("SONOFLOW_THREADS", c.to_string());
+        }
         cmd.env(NODE_CONFIG_ENV, serde_json::to_string(&cfg)?)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
