@@ -28,6 +28,11 @@ if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null || ! comm
   apt-get install -y -q --no-install-recommends slurmctld slurmd slurm-client munge >/dev/null
 fi
 
+# The daemons' users (the packages create them; made here if a minimal image lacks them).
+for u in munge slurm; do
+  id "$u" >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin "$u"
+done
+
 # munge: a key (the package usually makes one), its folders owned by the munge user.
 if [ ! -s /etc/munge/munge.key ]; then
   if command -v mungekey >/dev/null; then mungekey --create --force; else
