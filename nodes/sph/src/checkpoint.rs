@@ -2,12 +2,12 @@
 //! warm-up cycles of a pulsatile flow).
 //!
 //! Layout (little endian): magic `SONOSPH\0`, u32 format version (1), u64 length L of a JSON
-//! header, the header (time, steps, next id, particle count, boundary bookkeeping, the parameters
-//! and open boundaries the state was computed with), then the particle arrays x, z, vx, vz, ρ, m
-//! (f64 each), kind (u8), id (u64), group (u16), and finally an FNV-1a 64-bit checksum of all the
-//! preceding bytes. Files are written to a temporary file, fsynced and renamed (with
-//! [`sonoflow_fileio::write_atomic`]), so a checkpoint on disk is never half written; a truncated
-//! or corrupted file is refused with a clear error.
+//! header, the header (time, steps, next id, particle count, boundary bookkeeping, shifting and
+//! guard counters, the parameters and open boundaries the state was computed with), then the
+//! particle arrays x, z, vx, vz, ρ, m (f64 each), kind (u8), id (u64), group (u16), and finally an
+//! FNV-1a 64-bit checksum of all the preceding bytes. Files are written to a temporary file,
+//! fsynced and renamed (with [`sonoflow_fileio::write_atomic`]), so a checkpoint on disk is never
+//! half written; a truncated or corrupted file is refused with a clear error.
 
 use std::io::Read;
 use std::path::Path;
@@ -49,6 +49,15 @@ pub struct CheckpointHeader {
     pub last_step: Option<crate::step::StepReport>,
     /// Mass bookkeeping per open boundary.
     pub fluxes: Vec<BoundaryFlux>,
+    /// Shifting bookkeeping so far: Σ |δr_shift|² and Σ |u Δt|² over fluid particles and steps
+    /// (their ratio is [`crate::Diagnostics::shift_ratio`]). Absent in files written before it was
+    /// added: (0, 0).
+    #[serde(default)]
+    pub shift_sums: (Real, Real),
+    /// Anti-penetration guard corrections so far ([`crate::Diagnostics::guard_corrections`]).
+    /// Absent in files written before it was added: 0.
+    #[serde(default)]
+    pub guard_corrections: u64,
     /// Parameters of the run that wrote it.
     pub params: SphParams,
     /// Open boundaries of the run that wrote it.

@@ -13,7 +13,10 @@
 //!   with a bit-identical portable twin), ~8× faster; the solver's default (`SphParams::fast_rhs`).
 //! * [`solver`]: second-order predictor–corrector, adaptive dt (CFL, viscous, force), outputs at
 //!   exact times, blow-up detection naming time, particle and criterion.
-//! * [`setup`], [`analytic`]: plane-channel lattice and Morris et al. (1997) series solutions.
+//! * [`setup`], [`analytic`]: validation set-ups (plane channels, Taylor–Green vortex, lid-driven
+//!   cavity with its wall-domain guard) and Morris et al. (1997) series solutions.
+//! * [`params`]: [`SphParams`]; the defaults add particle shifting and δ-SPH to the paper's scheme
+//!   (stable on every validation case), [`SphParams::paper_scheme`] is the paper's as published.
 //! * [`waveform`]: periodic waveforms (Fourier series; the synthetic carotid inlet waveform).
 //! * [`womersley`]: 2D channel Womersley solutions (validation reference and imposed inlet profile).
 //! * [`boundary`]: open boundaries — the paper's virtual inflow/outflow reservoirs.
@@ -52,8 +55,8 @@ pub use boundary::{BoundaryFlux, OpenBoundary, ProfileKind};
 pub use checkpoint::{Checkpoint, CheckpointError, CheckpointHeader};
 pub use kernel::{Kernel, KernelKind};
 pub use neighbours::{CellList, Period};
-pub use params::{Integrator, ParamError, PulsatileForce, SphParams, ViscousConstant, ViscousTerm};
+pub use params::{Integrator, ParamError, PulsatileForce, Scheme, SphParams, ViscousConstant, ViscousTerm};
 pub use particles::{ParticleKind, Particles};
 pub use solver::{BlowUpCriterion, Diagnostics, DtCriterion, Solver, SphError, StepReport};
-pub use walls::{Domain, WallMotion};
+pub use walls::{BoxDomain, Domain, WallMotion};
 pub use waveform::{Waveform, WaveformSpec};

@@ -1,8 +1,11 @@
 //! Test fixtures (feature `testkit`), shared by this crate's tests (`tests/stiff.rs`,
 //! `channel.rs`, `operators.rs`, `fast_rhs.rs`), its examples and the stability matrix
 //! (`sonoflow stability`): the stiff and extreme scenes of sph-validation.md §e, each run to its
-//! measurement, and the error measures. The callers state the bounds. Test code: it panics where
-//! a scene cannot be built as written.
+//! measurement, and the error measures. The callers state the bounds. The scenes run the library
+//! defaults ([`Scheme::Stabilised`]) but three, which run the paper's scheme their bars were set
+//! for: the Taylor–Green vortex (with a given shifting coefficient), the flow reversal and the
+//! hydrostatic tank (their `…_with` variants take the scheme). Test code: it panics where a scene
+//! cannot be built as written.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::f64::consts::PI;
@@ -10,8 +13,8 @@ use std::sync::Arc;
 
 use crate::setup::{ChannelConfig, OpenChannelConfig};
 use crate::{
-    BlowUpCriterion, Domain, ParticleKind, Particles, Period, Real, Solver, SphError, SphParams, StepReport, Waveform,
-    WaveformSpec,
+    BlowUpCriterion, BoxDomain, ParticleKind, Particles, Period, Real, Scheme, Solver, SphError, SphParams, StepReport,
+    Waveform, WaveformSpec,
 };
 
 /// Reference density of every scene \[kg/m³\].
@@ -30,15 +33,17 @@ pub fn splitmix(seed: &mut u64) -> Real {
 }
 
 /// The validation open channel ([`OpenChannelConfig::validation`]) at sound speed `c` with
-/// background pressure `background_pressure`, inflow `inflow`, started developed or at rest.
+/// background pressure `background_pressure`, inflow `inflow`, started developed or at rest, with
+/// `scheme`.
 pub fn open_channel(
     inflow: Waveform,
     c: Real,
     background_pressure: Real,
     developed: bool,
+    scheme: Scheme,
 ) -> Result<(OpenChannelConfig, Solver), SphError> {
     let cfg = OpenChannelConfig::validation(inflow, developed);
-    let params = SphParams { background_pressure, ..cfg.solver_params(c) };
+    let params = scheme.apply(SphParams { background_pressure, ..cfg.solver_params(c) });
     let (p, bs) = cfg.build();
     let s = Solver::new(params, p, 0.0)?.with_open_boundaries(bs)?;
     Ok((cfg, s))
@@ -87,7 +92,7 @@ pub struct SteadyChannel {
 /// Runs [`SteadyChannel`].
 pub fn steady_channel(c: Real, t_end: Real) -> Result<SteadyChannel, SphError> {
     let w = WaveformSpec::Constant { value: 0.02 }.build().expect("a constant waveform");
-    let (cfg, mut solver) = open_channel(w, c, 0.0, true)?;
+    let (cfg, mut solver) = open_channel(w, c, 0.0, true, Scheme::Stabilised)?;
     solver.advance_to(t_end)?;
     let report = solver.step(None)?;
     let profile = cfg.mid_profile(&solver.particles);
@@ -97,8 +102,8 @@ pub fn steady_channel(c: Real, t_end: Real) -> Result<SteadyChannel, SphError> {
     Ok(SteadyChannel { cfg, solver, report, profile, error, cfl_dt })
 }
 
-/// Taylor–Green vortex on an n × n lattice at Reynolds number `re`, c = 10 U, shifting
-/// coefficient `shifting` ([`crate::setup::taylor_green`]).
+/// Taylor–Green vortex on an n × n lattice at Reynolds number `re`, c = 10 U, the paper's scheme
+/// with shifting coefficient `shifting` (no δ-SPH; [`crate::setup::taylor_green`]).
 pub fn taylor_green(n: usize, re: Real, shifting: Real) -> Result<Solver, SphError> {
     let (p, params) = crate::setup::taylor_green(n, re, 10.0, shifting);
     Solver::new(params, p, 0.0)
@@ -151,9 +156,22 @@ pub struct Reversal {
 }
 
 /// The validation channel driven by `w` (developed start) at sound speed `c` with background
-/// pressure `pb`, checked at t = first, first + 5 ms, … (`n` times).
+/// pressure `pb`, checked at t = first, first + 5 ms, … (`n` times); the paper's scheme (the bars
+/// of `tests/stiff.rs` and the stability matrix were set for it; [`reversal_with`] takes the scheme).
 pub fn reversal(w: &Waveform, c: Real, pb: Real, first: Real, n: usize) -> Result<Reversal, SphError> {
-    let (cfg, mut s) = open_channel(w.clone(), c, pb, true)?;
+    reversal_with(w, c, pb, first, n, Scheme::Paper)
+}
+
+/// [`reversal`] with `scheme`.
+pub fn reversal_with(
+    w: &Waveform,
+    c: Real,
+    pb: Real,
+    first: Real,
+    n: usize,
+    scheme: Scheme,
+) -> Result<Reversal, SphError> {
+    let (cfg, mut s) = open_channel(w.clone(), c, pb, true, scheme)?;
     let a = 0.5 * cfg.width;
     let (mut worst, mut pmin, mut min_pair): (Real, Real, Real) = (0.0, Real::INFINITY, Real::INFINITY);
     for j in 0..n {
@@ -171,19 +189,6 @@ pub fn reversal(w: &Waveform, c: Real, pb: Real, first: Real, n: usize) -> Resul
         }
     }
     Ok(Reversal { worst, min_gauge_pressure: pmin, min_pair, t_last: first + 0.005 * (n - 1) as Real })
-}
-
-/// Signed distance to the walls of a box [0, w] × [0, h] (negative inside).
-#[derive(Debug)]
-pub struct BoxDomain {
-    pub w: Real,
-    pub h: Real,
-}
-
-impl Domain for BoxDomain {
-    fn signed_distance(&self, x: Real, z: Real) -> Real {
-        (-x).max(x - self.w).max(-z).max(z - self.h)
-    }
 }
 
 /// What the hydrostatic tank measured.
@@ -209,8 +214,14 @@ pub struct Hydrostatic {
 
 /// Closed 2 × 2 mm box full of fluid under gravity g = 9.81 m/s² (+z is down), 20 × 20 lattice,
 /// c = 10 √(gH), hydrostatic initial density (free level at z = 0, the lid), run to
-/// `units` √(H/g) in ten segments.
+/// `units` √(H/g) in ten segments; the paper's scheme (the bars of `tests/stiff.rs` and the
+/// stability matrix were set for it; [`hydrostatic_tank_with`] takes the scheme).
 pub fn hydrostatic_tank(units: Real) -> Result<Hydrostatic, SphError> {
+    hydrostatic_tank_with(units, Scheme::Paper)
+}
+
+/// [`hydrostatic_tank`] with `scheme`.
+pub fn hydrostatic_tank_with(units: Real, scheme: Scheme) -> Result<Hydrostatic, SphError> {
     let (hgt, n, g) = (2e-3, 20i64, 9.81);
     let dx = hgt / n as Real;
     let c = 10.0 * (g * hgt).sqrt();
@@ -236,8 +247,8 @@ pub fn hydrostatic_tank(units: Real) -> Result<Hydrostatic, SphError> {
         }
     }
     let params =
-        SphParams { h: 1.2 * dx, rho0: RHO0, c, mu: 1e-3, body_force: [0.0, g], dt_max: 1.0, ..Default::default() };
-    let mut s = Solver::new(params, p, 0.0)?.with_domain(Arc::new(BoxDomain { w: hgt, h: hgt }));
+        SphParams { h: 1.2 * dx, rho0: RHO0, c, mu: 1e-3, body_force: [0.0, g], dt_max: 1.0, ..scheme.params() };
+    let mut s = Solver::new(params, p, 0.0)?.with_domain(Arc::new(BoxDomain { min: [0.0, 0.0], max: [hgt, hgt] }));
     let t_end = units * (hgt / g).sqrt();
     let (mut vmax, mut ke_peak): (Real, Real) = (0.0, 0.0);
     for j in 1..=10 {
@@ -323,7 +334,7 @@ pub fn guard_run() -> Result<GuardRun, SphError> {
     p.z[i] = -0.3 * dx;
     p.vz[i] = -1e-4;
     let id = p.id[i];
-    let mut s = Solver::new(params, p, 0.0)?.with_domain(Arc::new(BoxDomain { w: 1.0, h: 1e-3 }));
+    let mut s = Solver::new(params, p, 0.0)?.with_domain(Arc::new(BoxDomain { min: [0.0, 0.0], max: [1.0, 1e-3] }));
     for _ in 0..4 {
         s.step(None)?;
     }
@@ -335,7 +346,7 @@ pub fn guard_run() -> Result<GuardRun, SphError> {
 /// (|dū/dt| = 2.5 m/s²; Morris' criterion asks c ≥ 1 m/s) at sound speed `c`.
 pub fn impulsive_start(c: Real) -> Result<Solver, SphError> {
     let w = WaveformSpec::Cosine { amplitude: 0.02, period: 0.05, phase: 0.0, offset: 0.0 }.build().expect("valid");
-    Ok(open_channel(w, c, 0.0, false)?.1)
+    Ok(open_channel(w, c, 0.0, false, Scheme::Stabilised)?.1)
 }
 
 /// Whether `e` is a density-error blow-up before `t`.

@@ -65,3 +65,36 @@ pub trait Domain: Send + Sync + std::fmt::Debug {
     /// Signed distance of (x, z) to the wall (negative inside) \[m\].
     fn signed_distance(&self, x: Real, z: Real) -> Real;
 }
+
+/// The rectangle \[`min`\[0\], `max`\[0\]\] × \[`min`\[1\], `max`\[1\]\] (x, z) as the fluid region of the guard:
+/// the signed distance max(min − r, r − max) over both axes (exact inside, the largest axis
+/// distance outside), negative inside. The wall-domain guard of a closed box
+/// ([`crate::setup::CavityConfig`], the hydrostatic tank of the tests).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxDomain {
+    /// Lower corner (x, z) \[m\].
+    pub min: [Real; 2],
+    /// Upper corner (x, z) \[m\].
+    pub max: [Real; 2],
+}
+
+impl Domain for BoxDomain {
+    fn signed_distance(&self, x: Real, z: Real) -> Real {
+        (self.min[0] - x).max(x - self.max[0]).max(self.min[1] - z).max(z - self.max[1])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_domain_is_negative_inside_and_measures_the_nearest_side() {
+        let b = BoxDomain { min: [0.0, 1.0], max: [2.0, 4.0] };
+        assert_eq!(b.signed_distance(1.0, 2.0), -1.0); // nearest sides: x = 0, x = 2, z = 1
+        assert!((b.signed_distance(1.5, 3.9) + 0.1).abs() < 1e-12); // the lid side z = 4
+        assert_eq!(b.signed_distance(2.5, 2.0), 0.5);
+        assert_eq!(b.signed_distance(1.0, 0.75), 0.25);
+        assert_eq!(b.signed_distance(0.0, 2.0), 0.0);
+    }
+}

@@ -4,7 +4,7 @@ use nalgebra::{Matrix3, Vector3};
 use sonoflow_sph::setup::ChannelConfig;
 use sonoflow_sph::testkit::row_mean_vx;
 use sonoflow_sph::womersley::forced_velocity;
-use sonoflow_sph::{KernelKind, ParticleKind, Period, PulsatileForce, Real, Solver, SphParams, WaveformSpec};
+use sonoflow_sph::{KernelKind, ParticleKind, Period, PulsatileForce, Real, Scheme, Solver, SphParams, WaveformSpec};
 use std::f64::consts::PI;
 
 /// Least-squares fit of C + A cos(ωt) + B sin(ωt): returns (amplitude, phase lag in degrees
@@ -97,24 +97,15 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
     assert!(worst_profile <= 0.03, "profile error {worst_profile}");
 }
 
-fn taylor_green(n: usize, re: Real, shifting: Real, c: Real) -> (Solver, Real) {
-    let (p, params) = sonoflow_sph::setup::taylor_green(n, re, c, shifting);
-    (Solver::new(params, p, 0.0).expect("valid"), 1.0 / n as Real)
-}
-
-#[test]
-fn taylor_green_vortex_decays_at_the_viscous_rate_with_particle_shifting() {
-    // Bar (sph-validation.md §d): decay rate of |u| within 3 % of 8π²/Re up to t = 1 (Re = 100,
-    // 50², c = 10 U); rate fitted from log E(t) = log E₀ − 16π²ν t / L² over t ∈ [0.2, 1] (kinetic
-    // energy: the particle field's |u|max is noisy).
-    // The paper's scheme alone (no shifting) does NOT pass: the flow compresses the lattice at the
-    // four hyperbolic stagnation points (spacing ∝ e^{−Ukt}: 0.55 dx at t = 0.1), negative pressure
-    // then clumps pairs (min pair distance 0.09 dx) and E(1)/E₀ = 0.003 instead of 0.206, a decay
-    // rate 3.7× too high (`examples/taylor_green.rs 50 100`; background pressure ρU² or δ-SPH do not
-    // cure it). Particle shifting with A = 4 keeps the distribution regular (min pair ≈ 0.8 dx):
-    // measured rate +0.4 %.
-    let re = 100.0;
-    let (mut s, _) = taylor_green(50, re, 4.0, 10.0);
+/// Taylor–Green vortex at Re 100 on 50², c = 10 U, run with `params` (from
+/// `setup::taylor_green`) to t = 1: the |u| decay rate fitted from log E(t) = log E₀ − 2 rate t
+/// over t ∈ [0.2, 1] (kinetic energy: the particle field's |u|max is noisy), against 8π²/Re.
+/// Returns (rate / exact − 1, max |ρ/ρ₀ − 1|, smallest pair distance in dx).
+fn taylor_green_decay(label: &str, shifting: Real, scheme: Scheme) -> (Real, Real, Real) {
+    let (re, n) = (100.0, 50);
+    let (p, params) = sonoflow_sph::setup::taylor_green(n, re, 10.0, 0.0);
+    let params = SphParams { shifting, ..scheme.apply(params) };
+    let mut s = Solver::new(params, p, 0.0).expect("valid");
     let (mut ts, mut ls) = (vec![], vec![]);
     for j in 0..=10 {
         let t = 0.1 * j as Real;
@@ -124,18 +115,43 @@ fn taylor_green_vortex_decays_at_the_viscous_rate_with_particle_shifting() {
             ls.push(s.diagnostics().kinetic_energy.ln());
         }
     }
-    let n = ts.len() as Real;
-    let (mt, ml) = (ts.iter().sum::<Real>() / n, ls.iter().sum::<Real>() / n);
+    let m = ts.len() as Real;
+    let (mt, ml) = (ts.iter().sum::<Real>() / m, ls.iter().sum::<Real>() / m);
     let slope = ts.iter().zip(&ls).map(|(t, l)| (t - mt) * (l - ml)).sum::<Real>()
         / ts.iter().map(|t| (t - mt) * (t - mt)).sum::<Real>();
     let rate = -slope / 2.0; // |u| decays at half the energy rate
     let exact = 8.0 * PI * PI / re;
     let d = s.diagnostics();
+    let out = (rate / exact - 1.0, d.max_density_error, d.min_pair_distance * n as Real);
     eprintln!(
-        "Taylor-Green Re {re}: |u| decay rate {rate:.4} vs 8 pi^2/Re = {exact:.4} ({:+.2} %), max |rho/rho0-1| {:.2e}, min pair distance {:.3} dx",
-        100.0 * (rate / exact - 1.0),
-        d.max_density_error,
-        d.min_pair_distance * 50.0
+        "Taylor-Green Re {re}, {label}: |u| decay rate {rate:.4} vs 8 pi^2/Re = {exact:.4} ({:+.2} %), max |rho/rho0-1| {:.2e}, min pair distance {:.3} dx",
+        100.0 * out.0,
+        out.1,
+        out.2
     );
-    assert!((rate / exact - 1.0).abs() <= 0.03, "rate {rate} vs {exact}");
+    out
+}
+
+#[test]
+fn taylor_green_vortex_decays_at_the_viscous_rate_with_particle_shifting() {
+    // Bar (sph-validation.md §d): decay rate of |u| within 3 % of 8π²/Re up to t = 1 (Re = 100,
+    // 50², c = 10 U).
+    // The paper's scheme alone (no shifting) does NOT pass: the flow compresses the lattice at the
+    // four hyperbolic stagnation points (spacing ∝ e^{−Ukt}: 0.55 dx at t = 0.1), negative pressure
+    // then clumps pairs (min pair distance 0.09 dx) and E(1)/E₀ = 0.003 instead of 0.206, a decay
+    // rate 3.7× too high (`examples/taylor_green.rs 50 100`; background pressure ρU² or δ-SPH do not
+    // cure it). Particle shifting with A = 4 (no δ-SPH) keeps the distribution regular (min pair
+    // ≈ 0.8 dx): measured rate −0.6 %.
+    let (err, _, _) = taylor_green_decay("paper's scheme + shifting A = 4", 4.0, Scheme::Paper);
+    assert!(err.abs() <= 0.03, "rate error {err}");
+}
+
+#[test]
+fn taylor_green_vortex_with_the_library_defaults() {
+    // The library defaults (shifting A = 2, δ-SPH 0.1): the same bar, decay rate within 3 % of
+    // 8π²/Re; measured −1.5 %, max |ρ/ρ₀ − 1| 1.5 %, min pair 0.79 dx.
+    let d = SphParams::default();
+    let (err, _, min_pair) = taylor_green_decay("library defaults", d.shifting, Scheme::Stabilised);
+    assert!(err.abs() <= 0.03, "rate error {err}");
+    assert!(min_pair >= 0.5, "{min_pair}");
 }

@@ -6,7 +6,7 @@ use serde::{Deserialize, Deserializer};
 use sonoflow_analytic_flow::{BulkMotion, GridSpec, Schedule, TissueParams};
 
 use crate::geometry::{carotid_bifurcation, stenosis, straight_tube, BuildOptions, InitialVelocity, VesselGeometry};
-use crate::{ProfileKind, Real, SphParams, WaveformSpec};
+use crate::{ProfileKind, Real, Scheme, SphParams, WaveformSpec};
 
 /// The vessel geometry: a preset name or a full description.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -39,20 +39,27 @@ impl GeometrySpec {
     }
 }
 
-/// The `solver` table: [`SphParams`] as given (missing fields at their defaults), and whether it
-/// gave `h` (if not, [`ProducerParams::prepare`] sets h = `h_over_dx` · `dx`).
+/// The `solver` table: [`SphParams`] as given (missing fields at their defaults), and which of
+/// the fields [`ProducerParams::prepare`] may set it gave: `h` (if not, h = `h_over_dx` · `dx`),
+/// `shifting` and `density_diffusion` (if not, those of [`ProducerParams::scheme`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SolverTable {
     /// The solver parameters as written.
     pub params: SphParams,
     /// True when the table sets `h`.
     pub h_given: bool,
+    /// True when the table sets `shifting`.
+    pub shifting_given: bool,
+    /// True when the table sets `density_diffusion`.
+    pub density_diffusion_given: bool,
 }
 
 impl<'de> Deserialize<'de> for SolverTable {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let v = serde_json::Value::deserialize(d)?;
         let h_given = v.get("h").is_some();
+        let shifting_given = v.get("shifting").is_some();
+        let density_diffusion_given = v.get("density_diffusion").is_some();
         let v = if v.is_null() { serde_json::json!({}) } else { v };
         let params = serde_path_to_error::deserialize(v).map_err(|e| {
             let path = e.path().to_string();
@@ -61,7 +68,7 @@ impl<'de> Deserialize<'de> for SolverTable {
                 _ => serde::de::Error::custom(format!("{path}: {}", e.into_inner())),
             }
         })?;
-        Ok(SolverTable { params, h_given })
+        Ok(SolverTable { params, h_given, shifting_given, density_diffusion_given })
     }
 }
 
@@ -105,6 +112,13 @@ pub struct ProducerParams {
     /// \[0.8, 3\]. Default 1.2.
     #[serde(default = "default_h_over_dx")]
     pub h_over_dx: Real,
+    /// The stabilising options of the solver by name: `"stabilised"` (default: particle shifting
+    /// A = 2 and δ-SPH δ = 0.1, stable on every validation case) or `"paper"` (the paper's scheme
+    /// as published: neither; unstable where the flow compresses the particles, see the sph crate's
+    /// README, "Defaults and the paper's scheme"). `solver.shifting` and
+    /// `solver.density_diffusion`, where given, override it.
+    #[serde(default)]
+    pub scheme: Scheme,
     /// Solver parameters ([`SphParams`]: c, mu, rho0, kernel, viscous term, cfl, …).
     #[serde(default)]
     pub solver: SolverTable,
@@ -183,6 +197,7 @@ impl Default for ProducerParams {
             geometry: default_geometry(),
             dx: default_dx(),
             h_over_dx: default_h_over_dx(),
+            scheme: Scheme::default(),
             solver: SolverTable::default(),
             inflow: default_inflow(),
             profile: ProfileKind::default(),
@@ -237,7 +252,7 @@ fn in_range(field: &str, v: Real, lo: Real, hi: Real) -> Result<(), InvalidParam
 pub struct Prepared {
     /// The parameters.
     pub params: ProducerParams,
-    /// The solver's parameters (h from `h_over_dx` unless given).
+    /// The solver's parameters (h from `h_over_dx` and the options of `scheme` unless given).
     pub solver: SphParams,
     /// The vessel geometry.
     pub geometry: VesselGeometry,
@@ -274,6 +289,13 @@ impl ProducerParams {
         let mut solver = p.solver.params.clone();
         if !p.solver.h_given {
             solver.h = p.h_over_dx * p.dx;
+        }
+        let scheme = p.scheme.params();
+        if !p.solver.shifting_given {
+            solver.shifting = scheme.shifting;
+        }
+        if !p.solver.density_diffusion_given {
+            solver.density_diffusion = scheme.density_diffusion;
         }
         solver.validate().map_err(|e| InvalidParams::new(format!("solver.{}", e.field), format!("solver.{e}")))?;
         let geometry = p.geometry.build()?;

@@ -73,6 +73,21 @@ fn parameters_are_checked_with_named_fields() {
 }
 
 #[test]
+fn the_scheme_sets_the_stabilising_options_unless_the_solver_table_gives_them() {
+    let opts = |v: serde_json::Value| {
+        let p = params(v).expect("valid");
+        (p.solver.shifting, p.solver.density_diffusion)
+    };
+    assert_eq!(opts(serde_json::json!({})), (2.0, 0.1), "default: stabilised");
+    assert_eq!(opts(serde_json::json!({ "scheme": "stabilised" })), (2.0, 0.1));
+    assert_eq!(opts(serde_json::json!({ "scheme": "paper" })), (0.0, 0.0));
+    assert_eq!(opts(serde_json::json!({ "scheme": "paper", "solver": { "shifting": 1.0 } })), (1.0, 0.0));
+    assert_eq!(opts(serde_json::json!({ "solver": { "density_diffusion": 0.0 } })), (2.0, 0.0));
+    let e = params(serde_json::json!({ "scheme": "plain" })).expect_err("unknown scheme");
+    assert!(e.contains("unknown variant `plain`, expected `stabilised` or `paper`"), "{e}");
+}
+
+#[test]
 fn the_launch_files_parameters_parse_with_their_defaults() {
     let carotid: ProducerParams = toml::from_str(
         r#"

@@ -329,6 +329,8 @@ impl Solver {
                 first_dt: self.first_dt,
                 last_step: self.last,
                 fluxes: self.boundaries.iter().map(|b| b.flux).collect(),
+                shift_sums: self.shift_sums,
+                guard_corrections: self.guard_corrections,
                 params: self.params.clone(),
                 boundaries: self.boundaries.iter().map(|b| b.spec.clone()).collect(),
             },
@@ -361,6 +363,8 @@ impl Solver {
             b.flux = *f;
         }
         s.steps = h.steps;
+        s.shift_sums = h.shift_sums;
+        s.guard_corrections = h.guard_corrections;
         s.first_dt = h.first_dt;
         s.last = h.last_step;
         s.next_id = s.next_id.max(h.next_id);
