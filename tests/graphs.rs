@@ -264,8 +264,9 @@ fn replaying_an_unfinished_recording_warns_and_says_how_many_messages_it_read() 
 }
 
 /// flow → simus → recorder: every recorded RF frame equals the library's RF for the recorded
-/// particles, computed here independently with the node's per-packet plan rule (bit for bit:
-/// the library is deterministic for any thread count).
+/// particles, computed here independently with the node's per-packet plan rule (the automatic
+/// margin: max over scatterers of distance + speed × packet duration, less the largest
+/// distance, plus one wavelength) — bit for bit: the library is deterministic for any thread count.
 #[test]
 fn simus_node_rf_equals_the_library() {
     let dir = tempfile::tempdir().unwrap();
@@ -281,7 +282,7 @@ fn simus_node_rf_equals_the_library() {
     let probe = sonoflow_simus::Probe::preset("paper-5mhz").unwrap();
     let medium = sonoflow_simus::Medium::default();
     let tx = sonoflow_simus::Transmit::plane_wave(&probe, medium.c, 0.0).unwrap();
-    let mut simus = sonoflow_simus::Simus::new(probe.clone(), medium, Default::default()).unwrap();
+    let mut simus = sonoflow_simus::Simus::new(probe.clone(), medium.clone(), Default::default()).unwrap();
     let mut plan = None;
     for (k, (s, r)) in snaps.iter().zip(&rfs).enumerate() {
         let (_, ps) = cdr::decode::<ParticleSnapshot>(s).unwrap();
@@ -291,8 +292,18 @@ fn simus_node_rf_equals_the_library() {
         let rc: Vec<f32> = ps.iter().map(|p| p.amplitude).collect();
         let scat = sonoflow_simus::ScattererSlices { x: &x, z: &z, rc: &rc };
         if k == 0 {
-            let d = scat.max_element_distance(probe.element_x(0), probe.element_x(127));
-            plan = Some(simus.plan_for_max_distance(d + 2e-3, tx.max_delay()).unwrap());
+            let (e0, e1) = (probe.element_x(0), probe.element_x(127));
+            let d = scat.max_element_distance(e0, e1);
+            // packets of 3 frames at the launch file's PRF (10 kHz)
+            let duration = 2.0 / 10e3;
+            let reach = ps.iter().map(|p| {
+                let (x, z) = (f64::from(p.x), f64::from(p.z));
+                let dx = (x - e0).abs().max((x - e1).abs());
+                (dx * dx + z * z).sqrt() + f64::from(p.vx.hypot(p.vz)) * duration
+            });
+            let margin = reach.fold(0.0, f64::max) - d + medium.c / probe.fc;
+            assert!(margin > medium.c / probe.fc && margin < 2e-3, "margin {margin}");
+            plan = Some(simus.plan_for_max_distance(d + margin, tx.max_delay()).unwrap());
         }
         let pl = plan.clone().unwrap();
         let mut expect = vec![0.0f32; 128 * pl.n_samples];

@@ -16,7 +16,7 @@ use sonoflow_messages::{
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, process_cpu_ns, transform, KindSpec, Kit};
 use sonoflow_simus::{
-    FramePlanner, FrequencyPlan, NoiseModel, NoiseParams, Scan, ScanParams, Simus, StaticEchoes, Transmit,
+    FramePlanner, FrequencyPlan, NoiseModel, NoiseParams, PacketMotion, Scan, ScanParams, Simus, StaticEchoes, Transmit,
 };
 
 /// The `simus` node kind.
@@ -50,13 +50,16 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         scene.fill(sample.payload());
         scene.extend_region();
         let all = sonoflow_simus::ScattererSlices { x: &scene.x, z: &scene.z, rc: &scene.rc };
-        let choice = planner.plan(&simus, all, h.frame_in_packet == 0)?;
+        // the packet's duration for the automatic plan margin (unknown packet length: none)
+        let motion = (h.packet_size > 0)
+            .then(|| PacketMotion { speed: &scene.speed, duration: f64::from(h.packet_size - 1) / p.prf });
+        let choice = planner.plan(&simus, all, motion, h.frame_in_packet == 0)?;
         let m = scene.n_moving;
         statics.set(&scene.x[m..], &scene.z[m..], &scene.rc[m..]);
         let scat = sonoflow_simus::ScattererSlices { x: &scene.x[..m], z: &scene.z[..m], rc: &scene.rc[..m] };
         if choice.replanned_in_packet {
             eprintln!(
-                "simus: scatterers moved beyond plan_margin within packet {} (frame {}): re-planning; raise plan_margin to keep one plan per packet",
+                "simus: scatterers moved beyond the plan margin within packet {} (frame {}): re-planning; set plan_margin (m) to keep one plan per packet",
                 h.packet, h.frame_in_packet
             );
         }
@@ -174,12 +177,14 @@ fn rf_header(
 
 /// A snapshot's scatterers as SIMUS slices: the moving ones first (`..n_moving`: blood,
 /// platelets, moving tissue), then the stationary tissue (`PARTICLE_TISSUE`), whose RF
-/// [`StaticEchoes`] computes once per plan.
+/// [`StaticEchoes`] computes once per plan; and their speeds (for the plan margin).
 #[derive(Default)]
 struct Scene {
     x: Vec<f32>,
     z: Vec<f32>,
     rc: Vec<f32>,
+    /// |v| (m/s) of each scatterer, same order.
+    speed: Vec<f32>,
     n_moving: usize,
     /// [x_min, x_max, z_min, z_max] of every scatterer in front of the array seen so far.
     region: Option<[f32; 4]>,
@@ -190,12 +195,14 @@ impl Scene {
         self.x.clear();
         self.z.clear();
         self.rc.clear();
+        self.speed.clear();
         let moving = particles.iter().filter(|q| q.kind != PARTICLE_TISSUE);
         let tissue = particles.iter().filter(|q| q.kind == PARTICLE_TISSUE);
         for q in moving.chain(tissue) {
             self.x.push(q.x);
             self.z.push(q.z);
             self.rc.push(q.amplitude);
+            self.speed.push(q.vx.hypot(q.vz));
         }
         self.n_moving = particles.iter().filter(|q| q.kind != PARTICLE_TISSUE).count();
     }

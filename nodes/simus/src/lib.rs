@@ -84,7 +84,10 @@ pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
 pub use phantom::{genscat, must_meandist, resolution_cell_area, Inclusion, Phantom, PhantomParams};
 pub use pressure::{pfield, pfield_3d, PfieldOptions, PressureField};
 pub use probe::{Baffle, ElementPosition, Probe, PRESET_NAMES};
-pub use scan::{tukey, FramePlanner, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams, TransmitField};
+pub use scan::{
+    packet_margin, tukey, FramePlanner, PacketMotion, PacketPlan, PlanChoice, ProbeSpec, Scan, ScanParams,
+    TransmitField, FALLBACK_PLAN_MARGIN,
+};
 pub use scatterers::{ScattererSlices, Scatterers};
 pub use simus::{zero_small_values, RfFrame, Simus};
 pub use statics::StaticEchoes;
