@@ -8,9 +8,12 @@
 //! with a a fluid particle (the rate loop), plus those with a a wall particle and b not (the wall
 //! interpolation). Pairs/s/core = that count / time per evaluation / threads.
 //!
-//! `cargo run --release -p sonoflow-sph --example rhs_bench -- [--fast-only] [--reach=K] [n_fluid...]`
+//! `cargo run --release -p sonoflow-sph --example rhs_bench -- [--fast-only] [--gather] [--paper] [--avx2] [--reach=K] [n_fluid...]`
 //! (default 26000 fluid particles; `--fast-only` skips timing the reference, e.g. under a profiler;
-//! `--reach=K`: fast grid cells per support radius, default 2; `--scene=box` or `--scene=channel`:
+//! `--reach=K`: fast grid cells per support radius, default 2; `--gather`: the fast evaluator's
+//! gather pair loop (each pair twice) instead of the symmetric one; `--paper`: the paper's scheme
+//! (no shifting, no δ-SPH) instead of the defaults; `--avx2`: the AVX2 build of the lanes (16
+//! registers) even where AVX-512VL is available; `--scene=box` or `--scene=channel`:
 //! only that scene).
 
 use std::time::Instant;
@@ -142,6 +145,9 @@ fn time(mut f: impl FnMut()) -> (Real, Real, Real) {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let fast_only = args.iter().any(|a| a == "--fast-only");
+    let gather = args.iter().any(|a| a == "--gather");
+    let paper = args.iter().any(|a| a == "--paper");
+    let backend = if args.iter().any(|a| a == "--avx2") { fast::Backend::Avx2 } else { fast::Backend::Auto };
     let reach: Option<usize> = args.iter().find_map(|a| a.strip_prefix("--reach=")).map(str::parse).transpose()?;
     let only = args.iter().find_map(|a| a.strip_prefix("--scene="));
     let sizes: Vec<usize> =
@@ -164,7 +170,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let g = params.body_force;
             let mut ref_ms = [0.0; 2];
             for (ti, threads) in [1usize, 2].into_iter().enumerate() {
-                let prm = SphParams { parallel: threads > 1, ..params.clone() };
+                let mut prm = SphParams { parallel: threads > 1, symmetric_pairs: !gather, ..params.clone() };
+                if paper {
+                    (prm.shifting, prm.density_diffusion) = (0.0, 0.0);
+                }
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
                 let (mut ws, mut cells) = (Workspace::default(), CellList::default());
                 let mut reference = || {
@@ -184,7 +193,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let (fmin, fmed, fcpu) = pool.install(|| {
                     time(|| {
                         let t = Instant::now();
-                        fast::compute_rates(&prm, &k, &p, g, &mut fws_ws, &mut fws);
+                        fast::compute_rates_with(&prm, &k, &p, g, &mut fws_ws, &mut fws, backend);
                         best_call = best_call.min(t.elapsed().as_secs_f64());
                         for (m, v) in phases.iter_mut().zip(fws.phase_seconds()) {
                             *m = m.min(v);
@@ -200,7 +209,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         scale = scale.max(x.abs());
                     }
                 }
-                for (path, tmin, tmed, tcpu) in [("reference", rmin, rmed, rcpu), ("fast", fmin, fmed, fcpu)] {
+                for (path, tmin, tmed, tcpu) in [
+                    ("reference", rmin, rmed, rcpu),
+                    (if gather { "fast-gathr" } else { "fast-symm" }, fmin, fmed, fcpu),
+                ] {
                     println!(
                         "{name:8} {:7} {n_wall:6} {:11.0}  {path:10} {threads:3}  {:8.2} / {:8.2}      {:7.2}  {:10.3e} {:10.3e}  {:7.1}  {:5.2}",
                         p.len() - n_wall,

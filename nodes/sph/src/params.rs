@@ -171,6 +171,13 @@ pub struct SphParams {
     /// any thread count; ~8× faster, see `PERF.md`). `false` runs the f64 reference
     /// `compute_rates`. Default true.
     pub fast_rhs: bool,
+    /// Fast evaluator: visit every pair once and add its terms to both particles (Newton's third
+    /// law; conflict-free stripes of cell rows, bit-identical for any thread count) instead of
+    /// gathering every particle's neighbours (each pair twice). The two differ by rounding only. The
+    /// symmetric loop halves the kernel evaluations but adds a read-modify-write of 7 (14 with the
+    /// δ-SPH and shifting sums) accumulators per neighbour; on the machines measured it is not
+    /// faster (`PERF.md`), so the default is false.
+    pub symmetric_pairs: bool,
 }
 
 impl Default for SphParams {
@@ -200,6 +207,7 @@ impl Default for SphParams {
             dt_collapse_ratio: 1e-3,
             parallel: true,
             fast_rhs: true,
+            symmetric_pairs: false,
         }
     }
 }

@@ -1,7 +1,8 @@
 //! The fast evaluator (`sonoflow_sph::fast`) against its reference twin `wcsph::compute_rates`:
 //! every kernel, both viscous terms, with and without density diffusion and shifting, on a jittered
 //! doubly periodic box, a channel with walls and an open channel with reservoirs; AVX2 against the
-//! portable lanes (bit for bit) and any thread count (bit for bit).
+//! portable lanes (bit for bit) and any thread count (bit for bit) — for both pair loops, the gather
+//! (each pair twice) and the symmetric one (each pair once, `SphParams::symmetric_pairs`).
 //!
 //! Tolerance: the pair terms run in f32 (dx exact to one rounding of itself, dz to ~2e-7 h, every
 //! product and sum ≤ 6e-8 relative) and the 8 lane sums are added in f64; a rate is then correct to
@@ -166,8 +167,8 @@ fn fast_rates_match_the_reference_for_every_kernel_term_and_option() {
             for term in [ViscousTerm::MeanValue, ViscousTerm::Morris] {
                 for extras in [false, true] {
                     // c = 4: pressure-dominated; c = 0.05: viscous and pressure terms of one size
-                    for c in [4.0, 0.05] {
-                        let prm = params(s, kind, term, extras, c);
+                    for (c, symmetric_pairs) in [(4.0, false), (0.05, false), (4.0, true), (0.05, true)] {
+                        let prm = SphParams { symmetric_pairs, ..params(s, kind, term, extras, c) };
                         let r = reference(&prm, &s.p);
                         let f = fast_ws(&prm, &s.p, Backend::Auto);
                         let e = [
@@ -188,7 +189,8 @@ fn fast_rates_match_the_reference_for_every_kernel_term_and_option() {
                             .into_iter()
                             .fold(0.0, Real::max),
                         ];
-                        let what = format!("{} {kind:?} {term:?} extras={extras} c={c}", s.name);
+                        let what =
+                            format!("{} {kind:?} {term:?} extras={extras} c={c} symmetric={symmetric_pairs}", s.name);
                         eprintln!(
                             "{what}: {}",
                             names.iter().zip(e).map(|(n, v)| format!("{n} {v:.1e}")).collect::<Vec<_>>().join(", ")
@@ -230,27 +232,39 @@ fn avx_and_portable_lanes_give_the_same_bits() {
     for s in [periodic_box(20, 1e-4), channel(), open_channel()] {
         for kind in KINDS {
             for term in [ViscousTerm::MeanValue, ViscousTerm::Morris] {
-                for extras in [false, true] {
-                    let prm = params(&s, kind, term, extras, 4.0);
+                for (extras, symmetric_pairs) in [(false, false), (true, false), (false, true), (true, true)] {
+                    let prm = SphParams { symmetric_pairs, ..params(&s, kind, term, extras, 4.0) };
                     let a = fast_ws(&prm, &s.p, Backend::Auto);
                     let b = fast_ws(&prm, &s.p, Backend::Portable);
-                    assert!(bits(&a) == bits(&b), "{} {kind:?} {term:?} extras={extras}", s.name);
+                    let c = fast_ws(&prm, &s.p, Backend::Avx2);
+                    let what = format!("{} {kind:?} {term:?} extras={extras} symmetric={symmetric_pairs}", s.name);
+                    assert!(bits(&a) == bits(&b), "{what}: auto vs portable");
+                    assert!(bits(&c) == bits(&b), "{what}: avx2 vs portable");
                 }
             }
         }
     }
 }
 
+/// Both pair loops; the 80 × 80 box has about a dozen stripes of cell rows (the symmetric loop's units of
+/// parallel work, wrapping in z), the channel and open channel walls and reservoirs.
 #[test]
 fn fast_rates_are_bit_identical_for_any_thread_count_and_serial() {
-    for s in [periodic_box(40, 1e-4), channel(), open_channel()] {
-        for extras in [false, true] {
-            let base = params(&s, KernelKind::QuarticSpline, ViscousTerm::MeanValue, extras, 4.0);
+    for s in [periodic_box(40, 1e-4), periodic_box(80, 1e-4), channel(), open_channel()] {
+        for (extras, symmetric_pairs) in [(false, false), (true, false), (false, true), (true, true)] {
+            let base = SphParams {
+                symmetric_pairs,
+                ..params(&s, KernelKind::QuarticSpline, ViscousTerm::MeanValue, extras, 4.0)
+            };
             let serial = fast_ws(&SphParams { parallel: false, ..base.clone() }, &s.p, Backend::Auto);
             for threads in [1, 2, 3] {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
                 let par = pool.install(|| fast_ws(&SphParams { parallel: true, ..base.clone() }, &s.p, Backend::Auto));
-                assert!(bits(&serial) == bits(&par), "{} extras={extras} threads={threads}", s.name);
+                assert!(
+                    bits(&serial) == bits(&par),
+                    "{} extras={extras} symmetric={symmetric_pairs} threads={threads}",
+                    s.name
+                );
             }
         }
     }
@@ -261,11 +275,16 @@ fn fast_rates_are_bit_identical_for_any_thread_count_and_serial() {
 fn reused_fast_workspace_gives_the_same_bits() {
     let scenes = [open_channel(), periodic_box(25, 1e-4), channel()];
     let (mut ws, mut fws) = (Workspace::default(), FastWorkspace::default());
-    for s in &scenes {
-        let prm = params(s, KernelKind::QuarticSpline, ViscousTerm::MeanValue, true, 4.0);
-        let k = Kernel::new(prm.kernel, prm.h);
-        fast::compute_rates(&prm, &k, &s.p, prm.body_force, &mut ws, &mut fws);
-        assert!(bits(&ws) == bits(&fast_ws(&prm, &s.p, Backend::Auto)), "{}", s.name);
+    for symmetric_pairs in [false, true, false] {
+        for s in &scenes {
+            let prm = SphParams {
+                symmetric_pairs,
+                ..params(s, KernelKind::QuarticSpline, ViscousTerm::MeanValue, true, 4.0)
+            };
+            let k = Kernel::new(prm.kernel, prm.h);
+            fast::compute_rates(&prm, &k, &s.p, prm.body_force, &mut ws, &mut fws);
+            assert!(bits(&ws) == bits(&fast_ws(&prm, &s.p, Backend::Auto)), "{} symmetric={symmetric_pairs}", s.name);
+        }
     }
 }
 
@@ -274,14 +293,14 @@ fn reused_fast_workspace_gives_the_same_bits() {
 #[test]
 fn fast_rates_with_a_large_background_pressure_stay_within_tolerance() {
     let s = periodic_box(30, 1e-4);
-    for pb_ratio in [1.0, 10.0, 100.0, 1000.0] {
+    for (pb_ratio, symmetric_pairs) in [1.0, 10.0, 100.0, 1000.0].into_iter().flat_map(|r| [(r, false), (r, true)]) {
         let base = params(&s, KernelKind::QuarticSpline, ViscousTerm::MeanValue, false, 4.0);
         // dynamic pressure range: c² · 0.01 ρ0 = 160 Pa
-        let prm = SphParams { background_pressure: pb_ratio * 160.0, ..base };
+        let prm = SphParams { background_pressure: pb_ratio * 160.0, symmetric_pairs, ..base };
         let (r, f) = (reference(&prm, &s.p), fast_ws(&prm, &s.p, Backend::Auto));
         let e = rel_err(&s.p, &r, &f, |x| x.acc.to_vec());
-        eprintln!("p_b = {pb_ratio} x 160 Pa: acc relative error {e:.2e}");
-        assert!(e <= TOL, "p_b = {pb_ratio} x 160 Pa: {e:.2e}");
+        eprintln!("p_b = {pb_ratio} x 160 Pa, symmetric={symmetric_pairs}: acc relative error {e:.2e}");
+        assert!(e <= TOL, "p_b = {pb_ratio} x 160 Pa, symmetric={symmetric_pairs}: {e:.2e}");
     }
 }
 

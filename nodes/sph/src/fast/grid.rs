@@ -63,6 +63,23 @@ impl Axis {
         }
     }
 
+    /// The cells at offsets `lo..=hi` from cell `i` (0 ≤ lo ≤ hi ≤ reach) as ≤ 2 segments (first,
+    /// last, shift) as in [`Axis::segments`]: the forward half of the neighbourhood of the symmetric
+    /// pass. Returns the segments and their count (0 when the span lies beyond a non-periodic end).
+    #[inline]
+    pub(super) fn forward(&self, i: usize, lo: usize, hi: usize) -> ([(usize, usize, Real); 2], usize) {
+        let n = self.n;
+        let none = (0, 0, 0.0);
+        let (a, b) = (i + lo, i + hi);
+        match self.period {
+            Some(l) if a >= n => ([(a - n, b - n, l), none], 1),
+            Some(l) if b >= n => ([(a, n - 1, 0.0), (0, b - n, l)], 2),
+            Some(_) => ([(a, b, 0.0), none], 1),
+            None if a >= n => ([none, none], 0),
+            None => ([(a, b.min(n - 1), 0.0), none], 1),
+        }
+    }
+
     /// Periodic axes need 2 reach + 1 distinct cells (each neighbour cell visited once).
     fn supported(&self, reach: usize) -> bool {
         self.period.is_none() || self.n > 2 * reach

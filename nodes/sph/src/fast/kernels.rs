@@ -27,7 +27,7 @@ const FAR: f32 = 1.0e6;
 /// Offset added to r² \[h²\] (see the module doc).
 const TINY2: f32 = 1.0e-30;
 /// `bits(r²) − R2_BIAS` maps r² ≤ TINY2 (the own lane) above every other r² as u32.
-const R2_BIAS: u32 = TINY2.to_bits() + 1;
+pub(super) const R2_BIAS: u32 = TINY2.to_bits() + 1;
 /// Lane masks: 8 loads from `MASK[8 − k..]` give k ones then zeros.
 static MASK: [u32; 16] = [!0, !0, !0, !0, !0, !0, !0, !0, 0, 0, 0, 0, 0, 0, 0, 0];
 /// Zero entries after the sorted arrays (a masked tail may read up to 7 past the end).
@@ -140,10 +140,13 @@ impl Shape for Cubic {
 /// into the run's row frame.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Chunk {
-    i: u32,
-    k: u8,
-    frame: u8,
-    dz: f32,
+    pub(super) i: u32,
+    pub(super) k: u8,
+    pub(super) frame: u8,
+    /// 1: the lanes up to the running particle's own sorted index are left out (the own-row chunks
+    /// of the symmetric pass).
+    pub(super) own: u8,
+    pub(super) dz: f32,
 }
 
 /// Chunks of the neighbour runs of one cell, and per-lane pair values of one particle (pass 1 of
@@ -151,10 +154,10 @@ pub(super) struct Chunk {
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
     /// `chunks[..n]` are the cell's chunks.
-    chunks: Vec<Chunk>,
-    n: usize,
-    /// dx, dz, f_s, d_s/r, d_s r/(r² + 0.01) per lane.
-    lane: [Vec<f32>; 5],
+    pub(super) chunks: Vec<Chunk>,
+    pub(super) n: usize,
+    /// dx, dz, f_s, d_s/r, d_s r/(r² + 0.01), r² per lane.
+    pub(super) lane: [Vec<f32>; 6],
 }
 
 /// Per-evaluation constants of the chunk lists.
@@ -222,14 +225,14 @@ impl Scratch {
                     }
                     if len <= 16 {
                         let k1 = len.min(8);
-                        self.chunks[n] = Chunk { i: s as u32, k: k1 as u8, frame, dz };
-                        self.chunks[n + 1] = Chunk { i: (s + 8) as u32, k: (len - k1) as u8, frame, dz };
+                        self.chunks[n] = Chunk { i: s as u32, k: k1 as u8, frame, own: 0, dz };
+                        self.chunks[n + 1] = Chunk { i: (s + 8) as u32, k: (len - k1) as u8, frame, own: 0, dz };
                         n += len.div_ceil(8);
                     } else {
                         let mut i = s;
                         while i < e {
                             let k = (e - i).min(8);
-                            self.chunks[n] = Chunk { i: i as u32, k: k as u8, frame, dz };
+                            self.chunks[n] = Chunk { i: i as u32, k: k as u8, frame, own: 0, dz };
                             n += 1;
                             i += k;
                         }
@@ -250,7 +253,7 @@ impl Scratch {
 
 /// x/h of particle a in frame 0, or in the three frames, as f32 (hi, lo) pairs.
 #[inline(always)]
-fn frames(xoh: Real, shifts: &[Real; 3], all: bool) -> [f32; 6] {
+pub(super) fn frames_of(xoh: Real, shifts: &[Real; 3], all: bool) -> [f32; 6] {
     let mut f = [0.0f32; 6];
     for (j, &s) in shifts.iter().enumerate().take(if all { 3 } else { 1 }) {
         let x = xoh - s;
@@ -310,28 +313,97 @@ pub(super) struct RateConsts {
 
 /// Per-particle lane sums, reduced in f64.
 #[derive(Clone, Copy, Debug, Default)]
-struct Sums {
-    drho: Real,
-    apx: Real,
-    apz: Real,
-    s1: Real,
-    s2: Real,
-    s3: Real,
-    r2min: Real,
-    dsum: Real,
-    gc: [Real; 2],
-    gu: [Real; 4],
+pub(super) struct Sums {
+    pub(super) drho: Real,
+    pub(super) apx: Real,
+    pub(super) apz: Real,
+    pub(super) s1: Real,
+    pub(super) s2: Real,
+    pub(super) s3: Real,
+    pub(super) r2min: Real,
+    pub(super) dsum: Real,
+    pub(super) gc: [Real; 2],
+    pub(super) gu: [Real; 4],
 }
 
 /// Smallest r² > TINY2 of the lanes \[h²\] (∞ if none).
 #[inline(always)]
-fn r2min_of<L: Lanes>(acc: L) -> Real {
+pub(super) fn r2min_of<L: Lanes>(acc: L) -> Real {
     let m = acc.min_bits();
     if m == u32::MAX {
         Real::INFINITY
     } else {
         f32::from_bits(m + R2_BIAS) as Real
     }
+}
+
+/// Pass 1 of the pair loops: for every lane of `chunks`, dx, dz (units of h), f_s, d_s/r and, with
+/// `kk`, d_s r/(r² + 0.01), with `keep_r2` r² (the symmetric pass, whose own-row chunks leave out
+/// the lanes up to `a`), into the scratch lanes (8 per chunk); returns the lane
+/// minima of r² (as [`Lanes::min_bits_sub`] with [`R2_BIAS`]).
+///
+/// # Safety
+/// `L::available()`; the position slices are padded with [`PAD`] entries; every chunk index < n.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn geometry<L: Lanes, S: Shape>(
+    pos: &Pos,
+    frames: &Frames,
+    chunks: &[Chunk],
+    lane: &mut [Vec<f32>; 6],
+    shifted: bool,
+    a: usize,
+    kk: bool,
+    keep_r2: bool,
+) -> L {
+    let (eps, one, tiny) = (L::splat(0.01), L::splat(1.0), L::splat(TINY2));
+    let (pxh, pxl, pz) = (pos.xh.as_ptr(), pos.xl.as_ptr(), pos.zr.as_ptr());
+    assert!(lane.iter().all(|l| l.len() >= 8 * chunks.len()));
+    let [ldx, ldz, lf, lfr, lkk, lr2] = lane;
+    let (ldx, ldz, lf, lfr, lkk, lr2) =
+        (ldx.as_mut_ptr(), ldz.as_mut_ptr(), lf.as_mut_ptr(), lfr.as_mut_ptr(), lkk.as_mut_ptr(), lr2.as_mut_ptr());
+    let fr = frames_of(pos.xoh[a], &frames.shifts, shifted);
+    let zra = L::splat(pos.zr[a]);
+    let far = L::splat(FAR);
+    let mut r2min = L::splat(f32::from_bits(u32::MAX));
+    for (j, ck) in chunks.iter().enumerate() {
+        let i = ck.i as usize;
+        // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
+        let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
+        // SAFETY: L::available() (caller); k ≤ 8.
+        let mk = unsafe { mask::<L>(ck.k as usize) };
+        let fj = 2 * ck.frame as usize;
+        let dx = L::splat(fr[fj]).sub(ld(pxh)).add(L::splat(fr[fj + 1]).sub(ld(pxl)));
+        let dx = far.blend(dx, mk);
+        let dx = if keep_r2 {
+            // the symmetric pass: own-row lanes up to a are left out
+            let lo = if ck.own != 0 { (a + 1).saturating_sub(i).min(8) } else { 0 };
+            // SAFETY: L::available() (caller); lo ≤ 8.
+            dx.blend(far, unsafe { mask::<L>(lo) })
+        } else {
+            dx
+        };
+        let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
+        let r2 = dz.mul_add(dz, dx.mul_add(dx, tiny));
+        r2min = r2min.min_bits_sub(r2, R2_BIAS);
+        let rr = r2.sqrt();
+        let inv = one.div(rr);
+        let (f, d) = S::f_d(rr);
+        // SAFETY: the scratch lanes hold 8 per chunk (asserted).
+        unsafe {
+            L::store(ldx.add(8 * j), dx);
+            L::store(ldz.add(8 * j), dz);
+            L::store(lf.add(8 * j), f);
+            L::store(lfr.add(8 * j), d.mul(inv));
+            if kk {
+                L::store(lkk.add(8 * j), d.mul(rr).div(r2.add(eps)));
+            }
+            if keep_r2 {
+                L::store(lr2.add(8 * j), r2);
+            }
+        }
+    }
+    r2min
 }
 
 /// Lane sums of particle `a` over the chunks of its cell, in two passes: pass 1 computes the pair
@@ -351,45 +423,13 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
     a: usize,
     inv_fdp: f32,
 ) -> Sums {
-    let pos = &inp.pos;
-    let (zero, eps, one, c02, tiny) = (L::splat(0.0), L::splat(0.01), L::splat(1.0), L::splat(0.2), L::splat(TINY2));
-    let (pxh, pxl, pz) = (pos.xh.as_ptr(), pos.xl.as_ptr(), pos.zr.as_ptr());
-    let [ldx, ldz, lf, lfr, lkk] = &mut sc.lane;
+    let (zero, one, c02) = (L::splat(0.0), L::splat(1.0), L::splat(0.2));
+    let chunks = &sc.chunks[..sc.n];
+    // SAFETY: L::available() and padding (caller).
+    let r2min = unsafe { geometry::<L, S>(&inp.pos, inp.frames, chunks, &mut sc.lane, shifted, a, !MV || EX, false) };
+    let [ldx, ldz, lf, lfr, lkk, _] = &mut sc.lane;
     let (ldx, ldz, lf, lfr, lkk) =
         (ldx.as_mut_ptr(), ldz.as_mut_ptr(), lf.as_mut_ptr(), lfr.as_mut_ptr(), lkk.as_mut_ptr());
-    let chunks = &sc.chunks[..sc.n];
-    assert!(sc.lane.iter().all(|l| l.len() >= 8 * chunks.len()));
-    // pass 1: geometry and kernel
-    let fr = frames(pos.xoh[a], &inp.frames.shifts, shifted);
-    let zra = L::splat(pos.zr[a]);
-    let far = L::splat(FAR);
-    let mut r2min = L::splat(f32::from_bits(u32::MAX));
-    for (j, ck) in chunks.iter().enumerate() {
-        let i = ck.i as usize;
-        // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
-        let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
-        // SAFETY: L::available() (caller); k ≤ 8.
-        let mk = unsafe { mask::<L>(ck.k as usize) };
-        let fj = 2 * ck.frame as usize;
-        let dx = L::splat(fr[fj]).sub(ld(pxh)).add(L::splat(fr[fj + 1]).sub(ld(pxl)));
-        let dx = far.blend(dx, mk);
-        let dz = zra.add(L::splat(ck.dz)).sub(ld(pz));
-        let r2 = dz.mul_add(dz, dx.mul_add(dx, tiny));
-        r2min = r2min.min_bits_sub(r2, R2_BIAS);
-        let rr = r2.sqrt();
-        let inv = one.div(rr);
-        let (f, d) = S::f_d(rr);
-        // SAFETY: the scratch lanes hold 8 per chunk (asserted).
-        unsafe {
-            L::store(ldx.add(8 * j), dx);
-            L::store(ldz.add(8 * j), dz);
-            L::store(lf.add(8 * j), f);
-            L::store(lfr.add(8 * j), d.mul(inv));
-            if !MV || EX {
-                L::store(lkk.add(8 * j), d.mul(rr).div(r2.add(eps)));
-            }
-        }
-    }
     // pass 2: sums
     let (uax, uaz, pa) = (L::splat(inp.ch[0][a]), L::splat(inp.ch[1][a]), L::splat(inp.pr[a]));
     let (deva, inv_fdp) = (L::splat(inp.ch[5][a]), L::splat(inv_fdp));
@@ -495,7 +535,7 @@ pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: b
 
 /// Rate of one particle from its lane sums (f64).
 #[inline(always)]
-fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra: Real) -> Rate {
+pub(super) fn finish<S: Shape, const MV: bool, const EX: bool>(k: &RateConsts, s: &Sums, ra: Real) -> Rate {
     let mut drho = k.grad * s.drho;
     let (avx, avz) = if MV {
         // the own lane put V_a f_s(0) into s3: the self term of the Shepard denominator
@@ -580,7 +620,7 @@ pub(super) unsafe fn wall_cells<L: Lanes, S: Shape>(
             }
             let (zero, tiny, far) = (L::splat(0.0), L::splat(TINY2), L::splat(FAR));
             // pass 1: geometry and kernel (as in the rate pass)
-            let fr = frames(inp.pos.xoh[w], &inp.frames.shifts, shifted);
+            let fr = frames_of(inp.pos.xoh[w], &inp.frames.shifts, shifted);
             let zra = L::splat(inp.pos.zr[w]);
             for (j, ck) in chunks.iter().enumerate() {
                 let i = ck.i as usize;
@@ -681,7 +721,7 @@ mod tests {
                     let (s, e) = g.range(c);
                     for ka in s..e {
                         let a = order[ka];
-                        let f = frames(xoh[ka], &fr.shifts, shifted);
+                        let f = frames_of(xoh[ka], &fr.shifts, shifted);
                         let mut seen = Vec::new();
                         for ck in &sc.chunks[..sc.n] {
                             for l in 0..ck.k as usize {

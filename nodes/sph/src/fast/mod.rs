@@ -31,10 +31,12 @@
 mod grid;
 mod kernels;
 mod lanes;
+mod symmetric;
 
 use grid::Grid;
-use kernels::{Cubic, Frames, Pos, Quartic, RateConsts, RatesIn, Scratch, Shape, WallIn, Wendland, PAD};
+use kernels::{Cubic, Frames, Pos, Quartic, RateConsts, RatesIn, Scratch, Shape, Sums, WallIn, Wendland, PAD};
 use lanes::{Lanes, Portable};
+use symmetric::{SymIn, SymOut, NR, NR_BASIC};
 
 use crate::kernel::{Kernel, KernelKind};
 use crate::neighbours::CellList;
@@ -51,6 +53,41 @@ pub enum Backend {
     Auto,
     /// The portable lanes (same bits as AVX2; for tests and comparisons).
     Portable,
+    /// AVX2 + FMA with the 16 registers of AVX2 even where AVX-512VL would give 32 (same bits; for
+    /// tests and comparisons).
+    Avx2,
+}
+
+/// The lanes an evaluation runs on: `Avx` registers compiled for AVX2 + FMA, or for AVX-512F/VL as
+/// well (the same 256-bit operations, but 32 vector registers instead of 16: fewer spills in the
+/// pair loops, ~10 % faster, measured in `PERF.md`), or the portable twin. All give the same bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Simd {
+    Portable,
+    Avx2,
+    Avx512,
+}
+
+impl Simd {
+    fn detect(backend: Backend) -> Simd {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let avx2 = lanes::Avx::available();
+            let wide = avx2
+                && std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl");
+            match backend {
+                Backend::Auto if wide => Simd::Avx512,
+                Backend::Auto | Backend::Avx2 if avx2 => Simd::Avx2,
+                _ => Simd::Portable,
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = backend;
+            Simd::Portable
+        }
+    }
 }
 
 /// Default cells per support radius of the fast grid (cells of side ≥ support / reach, neighbours
@@ -105,6 +142,14 @@ pub struct FastWorkspace {
     /// Cells per support radius; 0 = [`REACH`].
     reach: usize,
     phases: [Real; 5],
+    /// Stripes of cell rows of the symmetric pass.
+    stripes: Vec<(usize, usize)>,
+    /// Received accumulators of the symmetric pass (f32, sorted order, padded).
+    acc: [Vec<f32>; NR],
+    /// The particles' own sums of the symmetric pass (sorted order).
+    own: Vec<Sums>,
+    /// 1/f_s(Δp/h) per sorted particle (f32, padded).
+    ifdp: Vec<f32>,
     /// Fill only `ws.rates` (the solver's steps); `ws.ux`, `uz`, `p`, `rho` are left as they are.
     pub(crate) rates_only: bool,
 }
@@ -149,7 +194,7 @@ pub fn compute_rates_with(
         wcsph::compute_rates(params, kernel, particles, &fws.cells, g, ws);
         return;
     }
-    let avx = backend == Backend::Auto && avx_available();
+    let simd = Simd::detect(backend);
     let t1 = std::time::Instant::now();
     if fws.sort(params, kernel, particles) {
         // coincident particles: the reference's 0/0 (NaN rates, reported by the solver)
@@ -160,26 +205,16 @@ pub fn compute_rates_with(
     }
     let t2 = std::time::Instant::now();
     if fws.any_wall {
-        fws.wall_pass(params, kernel, particles, g, avx);
+        fws.wall_pass(params, kernel, particles, g, simd);
     }
     let t3 = std::time::Instant::now();
     let spacing = wcsph::particle_spacing(params, kernel, particles);
-    fws.rate_pass(params, kernel, g, avx, spacing);
+    fws.rate_pass(params, kernel, g, simd, spacing);
     let t4 = std::time::Instant::now();
     fws.scatter(params, particles, ws);
     let t5 = std::time::Instant::now();
     let s = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64();
     fws.phases = [s(t0, t1), s(t1, t2), s(t2, t3), s(t3, t4), s(t4, t5)];
-}
-
-#[cfg(target_arch = "x86_64")]
-fn avx_available() -> bool {
-    lanes::Avx::available()
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-fn avx_available() -> bool {
-    false
 }
 
 /// Runs `f(c0, c1, item)` for every block of cells with its item.
@@ -348,7 +383,7 @@ impl FastWorkspace {
     }
 
     /// Wall particles' velocity, pressure and density, then their rate-pass channels.
-    fn wall_pass(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles, g: [Real; 2], avx: bool) {
+    fn wall_pass(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles, g: [Real; 2], simd: Simd) {
         let n = self.xoh.len();
         self.wall_out.resize(n, [0.0; 4]);
         let inp = WallIn {
@@ -368,9 +403,9 @@ impl FastWorkspace {
         };
         let (par, b, out) = (params.parallel, &self.blocks[..], &mut self.wall_out[..]);
         match kernel.kind {
-            KernelKind::QuarticSpline => wall_run::<Quartic>(&inp, par, avx, b, out),
-            KernelKind::WendlandC2 => wall_run::<Wendland>(&inp, par, avx, b, out),
-            KernelKind::CubicSpline => wall_run::<Cubic>(&inp, par, avx, b, out),
+            KernelKind::QuarticSpline => wall_run::<Quartic>(&inp, par, simd, b, out),
+            KernelKind::WendlandC2 => wall_run::<Wendland>(&inp, par, simd, b, out),
+            KernelKind::CubicSpline => wall_run::<Cubic>(&inp, par, simd, b, out),
         }
         let [ux, uz, mp, _, v, dev, _, _, _, _, _, _, _, pr] = &mut self.ch;
         for k in 0..n {
@@ -388,7 +423,7 @@ impl FastWorkspace {
         }
     }
 
-    fn rate_pass(&mut self, params: &SphParams, kernel: &Kernel, g: [Real; 2], avx: bool, spacing: Real) {
+    fn rate_pass(&mut self, params: &SphParams, kernel: &Kernel, g: [Real; 2], simd: Simd, spacing: Real) {
         let n = self.xoh.len();
         self.rates.resize(n, Rate::default());
         let h = kernel.h;
@@ -437,14 +472,87 @@ impl FastWorkspace {
         };
         let mv = params.viscous_term == ViscousTerm::MeanValue;
         let ex = params.density_diffusion > 0.0 || params.shifting > 0.0;
+        if params.symmetric_pairs {
+            let nr = if ex { NR } else { NR_BASIC };
+            for (c, v) in self.acc.iter_mut().enumerate().take(nr) {
+                v.clear();
+                v.resize(n + PAD, if c == symmetric::R2 { f32::from_bits(u32::MAX) } else { 0.0 });
+            }
+            for v in self.acc.iter_mut().skip(nr) {
+                v.resize(n + PAD, 0.0);
+            }
+            self.own.resize(n, Sums::default());
+            self.ifdp.clear();
+            if ex && params.shifting > 0.0 {
+                let f0 = |m: Real| (1.0 / f_scalar((m / params.rho0).sqrt() / h)) as f32;
+                self.ifdp.extend(self.mass.iter().map(|&m| f0(m)));
+            } else {
+                self.ifdp.resize(n, 1.0);
+            }
+            self.ifdp.resize(n + PAD, 1.0);
+            symmetric::stripes(&self.grid, params.periodic_z.is_some(), BLOCK_PARTICLES, &mut self.stripes);
+            let out = SymOut { acc: self.acc.each_mut().map(|v| v.as_mut_ptr()), own: self.own.as_mut_ptr() };
+            let fluid: &[u32] = if self.any_wall { &self.fluid } else { &[] };
+            let si = SymIn { r: inp, ifdp: &self.ifdp, fluid };
+            let (par, st) = (params.parallel, &self.stripes[..]);
+            macro_rules! go {
+                ($s:ty) => {
+                    match (mv, ex) {
+                        (true, false) => sym_run::<$s, true, false>(&si, par, simd, st, out),
+                        (true, true) => sym_run::<$s, true, true>(&si, par, simd, st, out),
+                        (false, false) => sym_run::<$s, false, false>(&si, par, simd, st, out),
+                        (false, true) => sym_run::<$s, false, true>(&si, par, simd, st, out),
+                    }
+                };
+            }
+            match kind {
+                KernelKind::QuarticSpline => go!(Quartic),
+                KernelKind::WendlandC2 => go!(Wendland),
+                KernelKind::CubicSpline => go!(Cubic),
+            }
+            let acc: [&[f32]; NR] = self.acc.each_ref().map(|v| &v[..]);
+            let (own, wall, rho, mass) = (&self.own[..], &self.wall[..], &self.rho[..], &self.mass[..]);
+            let f0 = f_scalar(0.0);
+            let kc = &si.r.k;
+            macro_rules! fin {
+                ($s:ty, $mv:literal, $ex:literal) => {
+                    for_blocks(par, &self.grid, &self.blocks, &mut self.rates, |c0, c1, o| {
+                        let (s0, s1) = (self.grid.range(c0).0, self.grid.range(c1 - 1).1);
+                        for i in s0..s1 {
+                            o[i - s0] = if wall[i] {
+                                Rate::default()
+                            } else {
+                                symmetric::combine::<$s, $mv, $ex>(kc, &own[i], &acc, i, rho[i], mass[i] / rho[i] * f0)
+                            };
+                        }
+                    })
+                };
+            }
+            macro_rules! fin_k {
+                ($s:ty) => {
+                    match (mv, ex) {
+                        (true, false) => fin!($s, true, false),
+                        (true, true) => fin!($s, true, true),
+                        (false, false) => fin!($s, false, false),
+                        (false, true) => fin!($s, false, true),
+                    }
+                };
+            }
+            match kind {
+                KernelKind::QuarticSpline => fin_k!(Quartic),
+                KernelKind::WendlandC2 => fin_k!(Wendland),
+                KernelKind::CubicSpline => fin_k!(Cubic),
+            }
+            return;
+        }
         let (par, b, out) = (params.parallel, &self.blocks[..], &mut self.rates[..]);
         macro_rules! go {
             ($s:ty) => {
                 match (mv, ex) {
-                    (true, false) => rate_run::<$s, true, false>(&inp, par, avx, b, out),
-                    (true, true) => rate_run::<$s, true, true>(&inp, par, avx, b, out),
-                    (false, false) => rate_run::<$s, false, false>(&inp, par, avx, b, out),
-                    (false, true) => rate_run::<$s, false, true>(&inp, par, avx, b, out),
+                    (true, false) => rate_run::<$s, true, false>(&inp, par, simd, b, out),
+                    (true, true) => rate_run::<$s, true, true>(&inp, par, simd, b, out),
+                    (false, false) => rate_run::<$s, false, false>(&inp, par, simd, b, out),
+                    (false, true) => rate_run::<$s, false, true>(&inp, par, simd, b, out),
                 }
             };
         }
@@ -492,17 +600,19 @@ impl FastWorkspace {
     }
 }
 
-fn wall_run<S: Shape>(inp: &WallIn, parallel: bool, avx: bool, blocks: &[(usize, usize)], out: &mut [[Real; 4]]) {
+fn wall_run<S: Shape>(inp: &WallIn, parallel: bool, simd: Simd, blocks: &[(usize, usize)], out: &mut [[Real; 4]]) {
     for_blocks(parallel, inp.pos.grid, blocks, out, |c0, c1, o| {
         SCRATCH.with(|b| {
             let buf = &mut b.borrow_mut();
             #[cfg(target_arch = "x86_64")]
-            if avx {
-                // SAFETY: avx is true only when AVX2 and FMA were detected.
-                unsafe { wall_avx::<S>(inp, c0, c1, o, buf) };
-                return;
+            match simd {
+                // SAFETY: Avx512 / Avx2 only when detected (`Simd::detect`).
+                Simd::Avx512 => return unsafe { wall_avx512::<S>(inp, c0, c1, o, buf) },
+                // SAFETY: as above.
+                Simd::Avx2 => return unsafe { wall_avx::<S>(inp, c0, c1, o, buf) },
+                Simd::Portable => {}
             }
-            let _ = avx;
+            let _ = simd;
             // SAFETY: the portable lanes run everywhere.
             unsafe { kernels::wall_cells::<Portable, S>(inp, c0, c1, o, buf) };
         });
@@ -512,7 +622,7 @@ fn wall_run<S: Shape>(inp: &WallIn, parallel: bool, avx: bool, blocks: &[(usize,
 fn rate_run<S: Shape, const MV: bool, const EX: bool>(
     inp: &RatesIn,
     parallel: bool,
-    avx: bool,
+    simd: Simd,
     blocks: &[(usize, usize)],
     out: &mut [Rate],
 ) {
@@ -520,12 +630,14 @@ fn rate_run<S: Shape, const MV: bool, const EX: bool>(
         SCRATCH.with(|b| {
             let buf = &mut b.borrow_mut();
             #[cfg(target_arch = "x86_64")]
-            if avx {
-                // SAFETY: avx is true only when AVX2 and FMA were detected.
-                unsafe { rates_avx::<S, MV, EX>(inp, c0, c1, o, buf) };
-                return;
+            match simd {
+                // SAFETY: Avx512 / Avx2 only when detected (`Simd::detect`).
+                Simd::Avx512 => return unsafe { rates_avx512::<S, MV, EX>(inp, c0, c1, o, buf) },
+                // SAFETY: as above.
+                Simd::Avx2 => return unsafe { rates_avx::<S, MV, EX>(inp, c0, c1, o, buf) },
+                Simd::Portable => {}
             }
-            let _ = avx;
+            let _ = simd;
             // SAFETY: the portable lanes run everywhere.
             unsafe { kernels::rates_cells::<Portable, S, MV, EX>(inp, c0, c1, o, buf) };
         });
@@ -548,10 +660,101 @@ unsafe fn rates_avx<S: Shape, const MV: bool, const EX: bool>(
 }
 
 /// # Safety
+/// The CPU supports AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+unsafe fn rates_avx512<S: Shape, const MV: bool, const EX: bool>(
+    inp: &RatesIn,
+    c0: usize,
+    c1: usize,
+    out: &mut [Rate],
+    buf: &mut Scratch,
+) {
+    // SAFETY: AVX2 and FMA (caller).
+    unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
+}
+
+/// # Safety
 /// The CPU supports AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn wall_avx<S: Shape>(inp: &WallIn, c0: usize, c1: usize, out: &mut [[Real; 4]], buf: &mut Scratch) {
     // SAFETY: AVX2 and FMA (caller).
     unsafe { kernels::wall_cells::<lanes::Avx, S>(inp, c0, c1, out, buf) }
+}
+
+/// # Safety
+/// The CPU supports AVX2, FMA, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+unsafe fn wall_avx512<S: Shape>(inp: &WallIn, c0: usize, c1: usize, out: &mut [[Real; 4]], buf: &mut Scratch) {
+    // SAFETY: AVX2 and FMA (caller).
+    unsafe { kernels::wall_cells::<lanes::Avx, S>(inp, c0, c1, out, buf) }
+}
+
+/// The symmetric pass: the even stripes, then the odd ones (on rayon threads when `parallel`).
+fn sym_run<S: Shape, const MV: bool, const EX: bool>(
+    inp: &SymIn,
+    parallel: bool,
+    simd: Simd,
+    stripes: &[(usize, usize)],
+    out: SymOut,
+) {
+    let one = |&(c0, c1): &(usize, usize)| {
+        SCRATCH.with(|b| {
+            let buf = &mut b.borrow_mut();
+            #[cfg(target_arch = "x86_64")]
+            match simd {
+                // SAFETY: Avx512 / Avx2 only when detected (`Simd::detect`); the stripes of one phase
+                // write disjoint indices (`symmetric`).
+                Simd::Avx512 => return unsafe { sym_avx512::<S, MV, EX>(inp, c0, c1, out, buf) },
+                // SAFETY: as above.
+                Simd::Avx2 => return unsafe { sym_avx::<S, MV, EX>(inp, c0, c1, out, buf) },
+                Simd::Portable => {}
+            }
+            let _ = simd;
+            // SAFETY: the portable lanes run everywhere; disjoint writes as above.
+            unsafe { symmetric::sym_cells::<Portable, S, MV, EX>(inp, c0, c1, out, buf) };
+        });
+    };
+    for phase in 0..2 {
+        #[cfg(feature = "parallel")]
+        if parallel {
+            use rayon::prelude::*;
+            stripes.par_iter().skip(phase).step_by(2).for_each(one);
+            continue;
+        }
+        let _ = parallel;
+        stripes.iter().skip(phase).step_by(2).for_each(one);
+    }
+}
+
+/// # Safety
+/// The CPU supports AVX2 and FMA; as [`symmetric::sym_cells`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn sym_avx<S: Shape, const MV: bool, const EX: bool>(
+    inp: &SymIn,
+    c0: usize,
+    c1: usize,
+    out: SymOut,
+    buf: &mut Scratch,
+) {
+    // SAFETY: AVX2 and FMA (caller); disjoint writes (caller).
+    unsafe { symmetric::sym_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
+}
+
+/// # Safety
+/// The CPU supports AVX2, FMA, AVX-512F and AVX-512VL; as [`symmetric::sym_cells`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+unsafe fn sym_avx512<S: Shape, const MV: bool, const EX: bool>(
+    inp: &SymIn,
+    c0: usize,
+    c1: usize,
+    out: SymOut,
+    buf: &mut Scratch,
+) {
+    // SAFETY: AVX2 and FMA (caller); disjoint writes (caller).
+    unsafe { symmetric::sym_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
 }
