@@ -7,7 +7,8 @@
 //! `cargo run --release -p sonoflow-sph --example carotid -- [dx_mm=0.3] [t_end=0.83] [every=0.05] [c=5.5] [shifting=0] [checkpoint_out]`
 //! (with `CHECKPOINT_IN`, `t_end` is the duration after the checkpoint's time)
 //! Environment: `DELTA` (δ-SPH), `TENSILE`, `PB` (background pressure), `H_OVER_DX` (1.2), `CFL` (0.25),
-//! `GEOM=tube` (a straight tube instead), `CHECKPOINT_IN` (resume), `PARALLEL=0` (no rayon), `INTEGRATOR=single` (one evaluation per step), `WALL_LAYERS` (type II layers; default from the support).
+//! `GEOM=tube` (a straight tube instead), `CHECKPOINT_IN` (resume), `PARALLEL=0` (no rayon), `INTEGRATOR=single` (one evaluation per step), `WALL_LAYERS` (type II layers; default from the support),
+//! `PAIRS=symmetric` (the fast evaluator's symmetric pair loop instead of the gather).
 
 use sonoflow_sph::geometry::{carotid_bifurcation, BuildOptions, InitialVelocity};
 use sonoflow_sph::{ProfileKind, Real, Solver, SphParams, WaveformSpec};
@@ -36,6 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         density_diffusion: std::env::var("DELTA").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0),
         dt_max: 1.0,
         parallel: std::env::var("PARALLEL").as_deref() != Ok("0"),
+        symmetric_pairs: std::env::var("PAIRS").as_deref() == Ok("symmetric"),
         integrator: if std::env::var("INTEGRATOR").as_deref() == Ok("single") {
             sonoflow_sph::Integrator::SingleEvaluation
         } else {

@@ -23,6 +23,17 @@ fn fit(ts: &[Real], us: &[Real], omega: Real) -> (Real, Real) {
 
 #[test]
 fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
+    womersley_case(false);
+}
+
+/// The same case with the fast evaluator's symmetric pair loop (each pair once): the same bars,
+/// the same figures to rounding (printed; `nodes/sph/PERF.md`).
+#[test]
+fn womersley_channel_with_the_symmetric_pair_loop() {
+    womersley_case(true);
+}
+
+fn womersley_case(symmetric_pairs: bool) {
     // Carotid-like α = 5.67 (a = 4 mm, T = 0.83 s, ν = 3.77e-6), 40 particles across, periodic
     // length 2 mm, forcing K cos ωt with K = 0.3 m/s² (the problem is linear: u·∇u = 0 in a
     // straight channel, so the small K only makes dt larger); centreline amplitude 1.026 K/ω =
@@ -51,6 +62,7 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
         body_force_pulsatile: Some(PulsatileForce { direction: [1.0, 0.0], waveform: forcing }),
         periodic_x: Some(Period { min: 0.0, length: cfg.length() }),
         dt_max: 1.0,
+        symmetric_pairs,
         ..Default::default()
     };
     let mut p = cfg.build();
@@ -89,7 +101,7 @@ fn womersley_channel_amplitude_phase_and_profile_match_the_analytic_solution() {
     let (amp_ref, lag_ref) = fit(&ts, &ue, omega);
     let diag = s.diagnostics();
     eprintln!(
-        "Womersley: centreline amplitude {:.5} (exact {:.5}, table 1.026 K/w = {:.5}), lag {:.2} deg (exact {:.2}), profile E_inf {:.2} % of amplitude, max |rho/rho0-1| {:.1e}, steps {}",
+        "Womersley (symmetric pairs {symmetric_pairs}): centreline amplitude {:.5} (exact {:.5}, table 1.026 K/w = {:.5}), lag {:.2} deg (exact {:.2}), profile E_inf {:.2} % of amplitude, max |rho/rho0-1| {:.1e}, steps {}",
         amp_sph, amp_ref, amp_exact, lag_sph, lag_ref, 100.0 * worst_profile, diag.max_density_error, diag.steps
     );
     assert!((amp_sph / amp_ref - 1.0).abs() <= 0.02, "amplitude {amp_sph} vs {amp_ref}");
