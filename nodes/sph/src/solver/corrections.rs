@@ -14,49 +14,57 @@ impl Solver {
         let h = self.kernel.h;
         let cap = 0.1 * h;
         let p = &mut self.particles;
-        let mut umax2: Real = 0.0;
-        for i in 0..p.len() {
-            if !p.kind[i].is_wall() {
-                umax2 = umax2.max(p.vx[i] * p.vx[i] + p.vz[i] * p.vz[i]);
-            }
-        }
+        let par = self.params.parallel;
+        // largest speed (order-free), then the shifts chunk by chunk, the chunks' sums added in order
+        let umax2 = chunks::map_ranges(par, p.len(), |r| {
+            r.filter(|&i| !p.kind[i].is_wall()).fold(0.0 as Real, |m, i| m.max(p.vx[i] * p.vx[i] + p.vz[i] * p.vz[i]))
+        })
+        .into_iter()
+        .fold(0.0 as Real, Real::max);
         let d = a * h * umax2.sqrt() * dt;
-        let (mut ss, mut sa) = (0.0, 0.0);
         let support = self.kernel.support_radius();
-        for i in 0..p.len() {
-            if !p.kind[i].is_fluid() {
-                continue;
-            }
-            let r = &self.ws.rates[i];
-            let (mut sx, mut sz) = (-d * r.grad_c[0], -d * r.grad_c[1]);
-            // within one support of an opening only parallel to it: the reservoir particles sit on
-            // lanes and move with the imposed profile, and shifting across the opening would move
-            // fluid out faster than the flow does (measured: −0.3 % of the particles in 0.1 s)
-            for b in &self.boundaries {
-                if !b.spec.near(p.x[i], p.z[i], support) {
+        let (kind, rates, boundaries) = (&p.kind, &self.ws.rates, &self.boundaries);
+        let parts = chunks::state_chunks(&mut p.x, &mut p.z, &mut p.vx, &mut p.vz, &mut p.rho);
+        let sums = chunks::map_chunks(par, parts, |c| {
+            let (mut ss, mut sa) = (0.0, 0.0);
+            for j in 0..c.x.len() {
+                let i = c.start + j;
+                if !kind[i].is_fluid() {
                     continue;
                 }
-                let (s, y) = b.spec.local(p.x[i], p.z[i]);
-                if s > -support && y.abs() <= b.spec.half_width + support {
-                    let n = b.spec.normal;
-                    let dn = sx * n[0] + sz * n[1];
-                    sx -= dn * n[0];
-                    sz -= dn * n[1];
+                let r = &rates[i];
+                let (mut sx, mut sz) = (-d * r.grad_c[0], -d * r.grad_c[1]);
+                // within one support of an opening only parallel to it: the reservoir particles sit
+                // on lanes and move with the imposed profile, and shifting across the opening would
+                // move fluid out faster than the flow does (measured: −0.3 % of the particles in 0.1 s)
+                for b in boundaries {
+                    if !b.spec.near(c.x[j], c.z[j], support) {
+                        continue;
+                    }
+                    let (s, y) = b.spec.local(c.x[j], c.z[j]);
+                    if s > -support && y.abs() <= b.spec.half_width + support {
+                        let n = b.spec.normal;
+                        let dn = sx * n[0] + sz * n[1];
+                        sx -= dn * n[0];
+                        sz -= dn * n[1];
+                    }
                 }
+                let len = (sx * sx + sz * sz).sqrt();
+                if len > cap {
+                    sx *= cap / len;
+                    sz *= cap / len;
+                }
+                c.x[j] += sx;
+                c.z[j] += sz;
+                ss += sx * sx + sz * sz;
+                sa += (c.vx[j] * c.vx[j] + c.vz[j] * c.vz[j]) * dt * dt;
+                let g = r.grad_u;
+                c.vx[j] += sx * g[0] + sz * g[1];
+                c.vz[j] += sx * g[2] + sz * g[3];
             }
-            let len = (sx * sx + sz * sz).sqrt();
-            if len > cap {
-                sx *= cap / len;
-                sz *= cap / len;
-            }
-            p.x[i] += sx;
-            p.z[i] += sz;
-            ss += sx * sx + sz * sz;
-            sa += (p.vx[i] * p.vx[i] + p.vz[i] * p.vz[i]) * dt * dt;
-            let g = r.grad_u;
-            p.vx[i] += sx * g[0] + sz * g[1];
-            p.vz[i] += sx * g[2] + sz * g[3];
-        }
+            (ss, sa)
+        });
+        let (ss, sa) = sums.into_iter().fold((0.0, 0.0), |(a0, a1), (b0, b1)| (a0 + b0, a1 + b1));
         self.shift_sums.0 += ss;
         self.shift_sums.1 += sa;
     }

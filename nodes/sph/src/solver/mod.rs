@@ -28,6 +28,7 @@ use crate::waveform::Waveform;
 use crate::wcsph::{compute_rates, Rate, Workspace};
 use crate::Real;
 
+mod chunks;
 mod corrections;
 
 /// Steps between two reorderings of the particle arrays by cell ([`Solver::reorder_by_cell`]).
@@ -593,21 +594,33 @@ impl Solver {
     fn adaptive_dt(&self) -> (Real, DtCriterion, usize) {
         let p = &self.params;
         let h = self.kernel.h;
-        let (mut vmax2, mut amax2, mut amax_i) = (0.0 as Real, 0.0 as Real, 0usize);
-        for i in 0..self.particles.len() {
-            match self.particles.kind[i] {
-                ParticleKind::Fluid => {
-                    let a = self.rates0[i].acc;
-                    let a2 = a[0] * a[0] + a[1] * a[1];
-                    if a2 > amax2 {
-                        amax2 = a2;
-                        amax_i = i;
+        let (pt, rates0) = (&self.particles, &self.rates0);
+        // per chunk, combined in order: the first largest acceleration, as a serial pass finds it
+        let partial = chunks::map_ranges(p.parallel, pt.len(), |range| {
+            let (mut vmax2, mut amax2, mut amax_i) = (0.0 as Real, 0.0 as Real, 0usize);
+            for i in range {
+                match pt.kind[i] {
+                    ParticleKind::Fluid => {
+                        let a = rates0[i].acc;
+                        let a2 = a[0] * a[0] + a[1] * a[1];
+                        if a2 > amax2 {
+                            amax2 = a2;
+                            amax_i = i;
+                        }
                     }
+                    ParticleKind::Buffer => {}
+                    _ => continue,
                 }
-                ParticleKind::Buffer => {}
-                _ => continue,
+                vmax2 = vmax2.max(pt.vx[i].powi(2) + pt.vz[i].powi(2));
             }
-            vmax2 = vmax2.max(self.particles.vx[i].powi(2) + self.particles.vz[i].powi(2));
+            (vmax2, amax2, amax_i)
+        });
+        let (mut vmax2, mut amax2, mut amax_i) = (0.0 as Real, 0.0 as Real, 0usize);
+        for (v, a, i) in partial {
+            vmax2 = vmax2.max(v);
+            if a > amax2 {
+                (amax2, amax_i) = (a, i);
+            }
         }
         let mut best = (p.dt_max, DtCriterion::Maximum);
         let mut consider = |dt: Real, c: DtCriterion| {
@@ -655,7 +668,6 @@ impl Solver {
             }
         }
         let half = 0.5 * dt;
-        let n = self.particles.len();
         // Save state n.
         self.x0.clone_from(&self.particles.x);
         self.z0.clone_from(&self.particles.z);
@@ -666,76 +678,103 @@ impl Solver {
         // half time below.
         {
             let pt = &mut self.particles;
-            for i in 0..n {
-                let r = self.rates0[i];
-                match pt.kind[i] {
-                    ParticleKind::Fluid => {
-                        pt.vx[i] += half * r.acc[0];
-                        pt.vz[i] += half * r.acc[1];
+            let (kind, rates0, vx0, vz0) = (&pt.kind, &self.rates0, &self.vx0, &self.vz0);
+            let parts = chunks::state_chunks(&mut pt.x, &mut pt.z, &mut pt.vx, &mut pt.vz, &mut pt.rho);
+            chunks::map_chunks(self.params.parallel, parts, |c| {
+                for j in 0..c.x.len() {
+                    let i = c.start + j;
+                    let r = rates0[i];
+                    match kind[i] {
+                        ParticleKind::Fluid => {
+                            c.vx[j] += half * r.acc[0];
+                            c.vz[j] += half * r.acc[1];
+                        }
+                        ParticleKind::Buffer => {
+                            // velocity and density are imposed/extrapolated at every stage
+                            c.x[j] += half * vx0[i];
+                            c.z[j] += half * vz0[i];
+                            continue;
+                        }
+                        _ => continue,
                     }
-                    ParticleKind::Buffer => {
-                        // velocity and density are imposed/extrapolated at every stage
-                        pt.x[i] += half * self.vx0[i];
-                        pt.z[i] += half * self.vz0[i];
-                        continue;
-                    }
-                    _ => continue,
+                    c.x[j] += half * vx0[i];
+                    c.z[j] += half * vz0[i];
+                    c.rho[j] += half * r.drho;
                 }
-                pt.x[i] += half * self.vx0[i];
-                pt.z[i] += half * self.vz0[i];
-                pt.rho[i] += half * r.drho;
-            }
+            });
         }
         self.wrap_positions();
         let t_half = t_n + half;
         self.set_boundary_time(t_half);
         self.evaluate(t_half);
         // Corrector and final update, in one pass over the rates with their finiteness check
-        // (`check_rates`, reported before anything else) and the nearest pair.
-        let mut max_err = 0.0 as Real;
-        let mut worst = 0usize;
+        // (`check_rates`, reported before anything else) and the nearest pair; chunk by chunk,
+        // the chunks' results combined in order (the serial pass's first/last-index rules).
+        let (mut max_err, mut worst) = (0.0 as Real, 0usize);
         let mut first_bad: Option<usize> = None;
         let mut bad_rate: Option<usize> = None;
         let mut min_pair = (Real::INFINITY, 0usize);
         {
             let pt = &mut self.particles;
             let rho_ref = self.params.rho0;
-            for i in 0..n {
-                let r = self.ws.rates[i];
-                // a sum is finite only if every term is
-                if bad_rate.is_none() && !(r.drho + r.acc[0] + r.acc[1]).is_finite() {
-                    bad_rate = Some(i);
+            let (kind, rates, x0, z0, vx0, vz0, rho0) =
+                (&pt.kind, &self.ws.rates, &self.x0, &self.z0, &self.vx0, &self.vz0, &self.rho0);
+            let parts = chunks::state_chunks(&mut pt.x, &mut pt.z, &mut pt.vx, &mut pt.vz, &mut pt.rho);
+            let partial = chunks::map_chunks(self.params.parallel, parts, |c| {
+                let mut max_err = 0.0 as Real;
+                let mut worst = 0usize;
+                let mut first_bad: Option<usize> = None;
+                let mut bad_rate: Option<usize> = None;
+                let mut min_pair = (Real::INFINITY, 0usize);
+                for j in 0..c.x.len() {
+                    let i = c.start + j;
+                    let r = rates[i];
+                    // a sum is finite only if every term is
+                    if bad_rate.is_none() && !(r.drho + r.acc[0] + r.acc[1]).is_finite() {
+                        bad_rate = Some(i);
+                    }
+                    let (vxh, vzh) = match kind[i] {
+                        ParticleKind::Fluid => (vx0[i] + half * r.acc[0], vz0[i] + half * r.acc[1]),
+                        ParticleKind::Buffer => {
+                            c.x[j] = x0[i] + dt * c.vx[j];
+                            c.z[j] = z0[i] + dt * c.vz[j];
+                            continue;
+                        }
+                        _ => continue,
+                    };
+                    let rhoh = rho0[i] + half * r.drho;
+                    let xh = x0[i] + half * vxh;
+                    let zh = z0[i] + half * vzh;
+                    c.vx[j] = 2.0 * vxh - vx0[i];
+                    c.vz[j] = 2.0 * vzh - vz0[i];
+                    c.rho[j] = 2.0 * rhoh - rho0[i];
+                    c.x[j] = 2.0 * xh - x0[i];
+                    c.z[j] = 2.0 * zh - z0[i];
+                    if kind[i].is_fluid() {
+                        if r.r2min < min_pair.0 {
+                            min_pair = (r.r2min, i);
+                        }
+                        let e = (c.rho[j] / rho_ref - 1.0).abs();
+                        if e > max_err || e.is_nan() {
+                            max_err = e;
+                            worst = i;
+                        }
+                    }
+                    // a sum is finite only if every term is (inf − inf is NaN)
+                    if first_bad.is_none() && !(c.x[j] + c.z[j] + c.vx[j] + c.vz[j] + c.rho[j]).is_finite() {
+                        first_bad = Some(i);
+                    }
                 }
-                let (vxh, vzh) = match pt.kind[i] {
-                    ParticleKind::Fluid => (self.vx0[i] + half * r.acc[0], self.vz0[i] + half * r.acc[1]),
-                    ParticleKind::Buffer => {
-                        pt.x[i] = self.x0[i] + dt * pt.vx[i];
-                        pt.z[i] = self.z0[i] + dt * pt.vz[i];
-                        continue;
-                    }
-                    _ => continue,
-                };
-                let rhoh = self.rho0[i] + half * r.drho;
-                let xh = self.x0[i] + half * vxh;
-                let zh = self.z0[i] + half * vzh;
-                pt.vx[i] = 2.0 * vxh - self.vx0[i];
-                pt.vz[i] = 2.0 * vzh - self.vz0[i];
-                pt.rho[i] = 2.0 * rhoh - self.rho0[i];
-                pt.x[i] = 2.0 * xh - self.x0[i];
-                pt.z[i] = 2.0 * zh - self.z0[i];
-                if pt.kind[i].is_fluid() {
-                    if r.r2min < min_pair.0 {
-                        min_pair = (r.r2min, i);
-                    }
-                    let e = (pt.rho[i] / rho_ref - 1.0).abs();
-                    if e > max_err || e.is_nan() {
-                        max_err = e;
-                        worst = i;
-                    }
+                (max_err, worst, first_bad, bad_rate, min_pair)
+            });
+            for (e, w, fb, br, mp) in partial {
+                if e > max_err || e.is_nan() {
+                    (max_err, worst) = (e, w);
                 }
-                // a sum is finite only if every term is (inf − inf is NaN)
-                if first_bad.is_none() && !(pt.x[i] + pt.z[i] + pt.vx[i] + pt.vz[i] + pt.rho[i]).is_finite() {
-                    first_bad = Some(i);
+                first_bad = first_bad.or(fb);
+                bad_rate = bad_rate.or(br);
+                if mp.0 < min_pair.0 {
+                    min_pair = mp;
                 }
             }
         }
