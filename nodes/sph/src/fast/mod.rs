@@ -97,6 +97,27 @@ const REACH: usize = 2;
 /// Blocks of cells handed to the threads hold at least this many particles.
 const BLOCK_PARTICLES: usize = 384;
 
+/// `$f!(Shape, MV, EX)` for the kernel `$kind` and the flags `$mv` (mean-value viscous term) and
+/// `$ex` (δ-SPH or shifting sums) as a type and two constants.
+macro_rules! shapes_and_flags {
+    ($kind:expr, $mv:expr, $ex:expr, $f:ident) => {
+        match ($kind, $mv, $ex) {
+            (KernelKind::QuarticSpline, true, false) => $f!(Quartic, true, false),
+            (KernelKind::QuarticSpline, true, true) => $f!(Quartic, true, true),
+            (KernelKind::QuarticSpline, false, false) => $f!(Quartic, false, false),
+            (KernelKind::QuarticSpline, false, true) => $f!(Quartic, false, true),
+            (KernelKind::WendlandC2, true, false) => $f!(Wendland, true, false),
+            (KernelKind::WendlandC2, true, true) => $f!(Wendland, true, true),
+            (KernelKind::WendlandC2, false, false) => $f!(Wendland, false, false),
+            (KernelKind::WendlandC2, false, true) => $f!(Wendland, false, true),
+            (KernelKind::CubicSpline, true, false) => $f!(Cubic, true, false),
+            (KernelKind::CubicSpline, true, true) => $f!(Cubic, true, true),
+            (KernelKind::CubicSpline, false, false) => $f!(Cubic, false, false),
+            (KernelKind::CubicSpline, false, true) => $f!(Cubic, false, true),
+        }
+    };
+}
+
 /// f32 channels of the sorted particles.
 const UX: usize = 0;
 const UZ: usize = 1;
@@ -495,21 +516,12 @@ impl FastWorkspace {
             let fluid: &[u32] = if self.any_wall { &self.fluid } else { &[] };
             let si = SymIn { r: inp, ifdp: &self.ifdp, fluid };
             let (par, st) = (params.parallel, &self.stripes[..]);
-            macro_rules! go {
-                ($s:ty) => {
-                    match (mv, ex) {
-                        (true, false) => sym_run::<$s, true, false>(&si, par, simd, st, out),
-                        (true, true) => sym_run::<$s, true, true>(&si, par, simd, st, out),
-                        (false, false) => sym_run::<$s, false, false>(&si, par, simd, st, out),
-                        (false, true) => sym_run::<$s, false, true>(&si, par, simd, st, out),
-                    }
+            macro_rules! sym {
+                ($s:ty, $mv:literal, $ex:literal) => {
+                    sym_run::<$s, $mv, $ex>(&si, par, simd, st, out)
                 };
             }
-            match kind {
-                KernelKind::QuarticSpline => go!(Quartic),
-                KernelKind::WendlandC2 => go!(Wendland),
-                KernelKind::CubicSpline => go!(Cubic),
-            }
+            shapes_and_flags!(kind, mv, ex, sym);
             let acc: [&[f32]; NR] = self.acc.each_ref().map(|v| &v[..]);
             let (own, wall, rho, mass) = (&self.own[..], &self.wall[..], &self.rho[..], &self.mass[..]);
             let f0 = f_scalar(0.0);
@@ -528,39 +540,16 @@ impl FastWorkspace {
                     })
                 };
             }
-            macro_rules! fin_k {
-                ($s:ty) => {
-                    match (mv, ex) {
-                        (true, false) => fin!($s, true, false),
-                        (true, true) => fin!($s, true, true),
-                        (false, false) => fin!($s, false, false),
-                        (false, true) => fin!($s, false, true),
-                    }
-                };
-            }
-            match kind {
-                KernelKind::QuarticSpline => fin_k!(Quartic),
-                KernelKind::WendlandC2 => fin_k!(Wendland),
-                KernelKind::CubicSpline => fin_k!(Cubic),
-            }
+            shapes_and_flags!(kind, mv, ex, fin);
             return;
         }
         let (par, b, out) = (params.parallel, &self.blocks[..], &mut self.rates[..]);
-        macro_rules! go {
-            ($s:ty) => {
-                match (mv, ex) {
-                    (true, false) => rate_run::<$s, true, false>(&inp, par, simd, b, out),
-                    (true, true) => rate_run::<$s, true, true>(&inp, par, simd, b, out),
-                    (false, false) => rate_run::<$s, false, false>(&inp, par, simd, b, out),
-                    (false, true) => rate_run::<$s, false, true>(&inp, par, simd, b, out),
-                }
+        macro_rules! gather {
+            ($s:ty, $mv:literal, $ex:literal) => {
+                rate_run::<$s, $mv, $ex>(&inp, par, simd, b, out)
             };
         }
-        match kind {
-            KernelKind::QuarticSpline => go!(Quartic),
-            KernelKind::WendlandC2 => go!(Wendland),
-            KernelKind::CubicSpline => go!(Cubic),
-        }
+        shapes_and_flags!(kind, mv, ex, gather);
     }
 
     /// Results in the particles' order: the particles' own state, the walls' interpolated one, the

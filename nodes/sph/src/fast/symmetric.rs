@@ -191,6 +191,18 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
     let (zero, one, c02) = (L::splat(0.0), L::splat(1.0), L::splat(0.2));
     let [pux, puz, _, pm, pv, pdev, pvd] = r.ch.map(|c| c.as_ptr());
     let (ppr, pifd) = (r.pr.as_ptr(), inp.ifdp.as_ptr());
+    // acc[ch][i..i + 8] = f(acc[ch][i..i + 8]): the neighbours' side of a chunk
+    macro_rules! upd {
+        ($i:expr, $ch:expr, |$b:ident| $e:expr) => {
+            // SAFETY: the accumulators hold n + PAD ≥ i + 8 values; this stripe alone writes them
+            // in this phase (caller).
+            unsafe {
+                let ptr = out.acc[$ch].add($i);
+                let $b = L::load(ptr);
+                L::store(ptr, $e);
+            }
+        };
+    }
     for c in c0..c1 {
         let (s, e) = grid.range(c);
         if s == e {
@@ -224,17 +236,6 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                 let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
                 // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
                 let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
-                macro_rules! upd {
-                    ($ch:expr, |$b:ident| $e:expr) => {
-                        // SAFETY: the accumulators hold n + PAD ≥ i + 8 values; this stripe alone
-                        // writes them in this phase (caller).
-                        unsafe {
-                            let ptr = out.acc[$ch].add(i);
-                            let $b = L::load(ptr);
-                            L::store(ptr, $e);
-                        }
-                    };
-                }
                 let (dx, dz, f, fr) = (lds(ldx), lds(ldz), lds(lf), lds(lfr));
                 let (gx, gz) = (dx.mul(fr), dz.mul(fr));
                 let dux = uax.sub(ld(pux));
@@ -243,14 +244,14 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                 // continuity: m_b (u_a − u_b)·∇_a W for a, m_a (u_a − u_b)·∇_a W for b
                 let dg = duz.mul_add(gz, dux.mul(gx));
                 drho = m.mul_add(dg, drho);
-                upd!(DRHO, |b| ma.mul_add(dg, b));
+                upd!(i, DRHO, |b| ma.mul_add(dg, b));
                 // pressure: (p_a/ρ_a² + p_b/ρ_b²) ∇_a W, times m_b for a and −m_a for b
                 let pt = pa.add(ld(ppr));
                 let (ptx, ptz) = (pt.mul(gx), pt.mul(gz));
                 apx = m.mul_add(ptx, apx);
                 apz = m.mul_add(ptz, apz);
-                upd!(APX, |b| nma.mul_add(ptx, b));
-                upd!(APZ, |b| nma.mul_add(ptz, b));
+                upd!(i, APX, |b| nma.mul_add(ptx, b));
+                upd!(i, APZ, |b| nma.mul_add(ptz, b));
                 let v = ld(pv);
                 let kk = if !MV || EX { lds(lkk) } else { zero };
                 if MV {
@@ -259,18 +260,18 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                     s2s = duz.mul_add(vw, s2s);
                     s3s = s3s.add(vw);
                     let nvw = nva.mul(f);
-                    upd!(S1, |b| dux.mul_add(nvw, b));
-                    upd!(S2, |b| duz.mul_add(nvw, b));
-                    upd!(S3, |b| b.sub(nvw));
+                    upd!(i, S1, |b| dux.mul_add(nvw, b));
+                    upd!(i, S2, |b| duz.mul_add(nvw, b));
+                    upd!(i, S3, |b| b.sub(nvw));
                 } else {
                     let vk = v.mul(kk);
                     s1s = vk.mul_add(dux, s1s);
                     s2s = vk.mul_add(duz, s2s);
                     let nvk = nva.mul(kk);
-                    upd!(S1, |b| nvk.mul_add(dux, b));
-                    upd!(S2, |b| nvk.mul_add(duz, b));
+                    upd!(i, S1, |b| nvk.mul_add(dux, b));
+                    upd!(i, S2, |b| nvk.mul_add(duz, b));
                 }
-                upd!(R2, |b| b.min_bits_sub(lds(lr2), R2_BIAS));
+                upd!(i, R2, |b| b.min_bits_sub(lds(lr2), R2_BIAS));
             }
             // the extra terms in a second sweep (fewer live registers than one sweep with all 14)
             if EX {
@@ -280,17 +281,6 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                     let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
                     // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
                     let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
-                    macro_rules! upd {
-                        ($ch:expr, |$b:ident| $e:expr) => {
-                            // SAFETY: the accumulators hold n + PAD ≥ i + 8 values; this stripe
-                            // alone writes them in this phase (caller).
-                            unsafe {
-                                let ptr = out.acc[$ch].add(i);
-                                let $b = L::load(ptr);
-                                L::store(ptr, $e);
-                            }
-                        };
-                    }
                     let (dx, dz, f, fr, kk) = (lds(ldx), lds(ldz), lds(lf), lds(lfr), lds(lkk));
                     let (gx, gz) = (dx.mul(fr), dz.mul(fr));
                     let dux = uax.sub(ld(pux));
@@ -298,7 +288,7 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                     let v = ld(pv);
                     let ddk = ld(pdev).sub(deva).mul(kk);
                     dsum = ld(pvd).mul_add(ddk, dsum);
-                    upd!(DSUM, |b| nvda.mul_add(ddk, b));
+                    upd!(i, DSUM, |b| nvda.mul_add(ddk, b));
                     let q = f.mul(ifa);
                     let q2 = q.mul(q);
                     let corr = v.mul(q2.mul(q2).mul_add(c02, one));
@@ -307,18 +297,18 @@ pub(super) unsafe fn sym_cells<L: Lanes, S: Shape, const MV: bool, const EX: boo
                     let qb = f.mul(ld(pifd));
                     let qb2 = qb.mul(qb);
                     let ncorr = nva.mul(qb2.mul(qb2).mul_add(c02, one));
-                    upd!(GCX, |b| ncorr.mul_add(gx, b));
-                    upd!(GCZ, |b| ncorr.mul_add(gz, b));
+                    upd!(i, GCX, |b| ncorr.mul_add(gx, b));
+                    upd!(i, GCZ, |b| ncorr.mul_add(gz, b));
                     let (vgx, vgz) = (v.mul(gx), v.mul(gz));
                     gu0 = dux.mul_add(vgx, gu0);
                     gu1 = dux.mul_add(vgz, gu1);
                     gu2 = duz.mul_add(vgx, gu2);
                     gu3 = duz.mul_add(vgz, gu3);
                     let (wgx, wgz) = (va.mul(gx), va.mul(gz));
-                    upd!(GU, |b| dux.mul_add(wgx, b));
-                    upd!(GU + 1, |b| dux.mul_add(wgz, b));
-                    upd!(GU + 2, |b| duz.mul_add(wgx, b));
-                    upd!(GU + 3, |b| duz.mul_add(wgz, b));
+                    upd!(i, GU, |b| dux.mul_add(wgx, b));
+                    upd!(i, GU + 1, |b| dux.mul_add(wgz, b));
+                    upd!(i, GU + 2, |b| duz.mul_add(wgx, b));
+                    upd!(i, GU + 3, |b| duz.mul_add(wgz, b));
                 }
             }
             let mut sm = Sums {
