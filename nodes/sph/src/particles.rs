@@ -119,9 +119,12 @@ impl Particles {
 
     /// Keeps the particles for which `keep(i)` is true, in their order.
     pub fn retain_indices(&mut self, keep: &[bool]) {
-        fn filt<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
-            let mut j = 0;
-            for i in 0..v.len() {
+        // the prefix before the first removed particle stays where it is
+        let first = keep.iter().position(|&k| !k).unwrap_or(keep.len());
+        fn filt<T: Copy>(v: &mut Vec<T>, keep: &[bool], first: usize) {
+            let start = first.min(v.len());
+            let mut j = start;
+            for i in start..v.len() {
                 if keep[i] {
                     v[j] = v[i];
                     j += 1;
@@ -129,15 +132,15 @@ impl Particles {
             }
             v.truncate(j);
         }
-        filt(&mut self.x, keep);
-        filt(&mut self.z, keep);
-        filt(&mut self.vx, keep);
-        filt(&mut self.vz, keep);
-        filt(&mut self.rho, keep);
-        filt(&mut self.mass, keep);
-        filt(&mut self.kind, keep);
-        filt(&mut self.id, keep);
-        filt(&mut self.group, keep);
+        filt(&mut self.x, keep, first);
+        filt(&mut self.z, keep, first);
+        filt(&mut self.vx, keep, first);
+        filt(&mut self.vz, keep, first);
+        filt(&mut self.rho, keep, first);
+        filt(&mut self.mass, keep, first);
+        filt(&mut self.kind, keep, first);
+        filt(&mut self.id, keep, first);
+        filt(&mut self.group, keep, first);
     }
 
     /// Reorders all arrays so that particle `order[k]` becomes particle k (`order` a permutation).

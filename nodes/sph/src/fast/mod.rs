@@ -285,7 +285,8 @@ impl FastWorkspace {
         self.phases
     }
 
-    fn reach(&self) -> usize {
+    /// Cells per kernel support radius of the grid.
+    pub(crate) fn reach(&self) -> usize {
         if self.reach == 0 {
             REACH
         } else {

@@ -69,14 +69,17 @@ impl Solver {
         self.shift_sums.1 += sa;
     }
 
-    /// Stores the particles in cell order (cells of one kernel support, row-major; stable), so that
-    /// neighbours are close in memory: the flow scrambles the initial order within a few thousand
-    /// steps, and the cell-sorted copies of the fast evaluator and the guard then gather from all
-    /// over memory. Ids are unchanged. The new order changes the order of the neighbour sums, hence
-    /// the results at the rounding level — deterministically (every 25th step, whatever the threads).
+    /// Stores the particles in cell order (row-major cells, stable; with the fast evaluator its own
+    /// cells of support / reach, so that its sorted copies and the rates scattered back run through
+    /// memory nearly in order; else cells of one kernel support), so that neighbours are close in
+    /// memory: the flow scrambles the initial order within a few thousand steps, and the cell-sorted
+    /// copies of the fast evaluator and the guard then gather from all over memory. Ids are
+    /// unchanged. The new order changes the order of the neighbour sums, hence the results at the
+    /// rounding level — deterministically (every 25th step, whatever the threads).
     pub(super) fn reorder_by_cell(&mut self) {
         let r = self.kernel.support_radius();
-        self.cells.build(&self.particles.x, &self.particles.z, r, self.params.periodic_x, self.params.periodic_z);
+        let cell = if self.params.fast_rhs { r / self.fast.reach() as Real } else { r };
+        self.cells.build(&self.particles.x, &self.particles.z, cell, self.params.periodic_x, self.params.periodic_z);
         let order = self.cells.sorted_indices();
         self.particles.permute(order);
         if self.carried && self.rates0.len() == order.len() {

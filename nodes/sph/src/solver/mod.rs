@@ -827,8 +827,9 @@ impl Solver {
         if single {
             // keep the carried rates aligned with the particles the exchange removed and created
             if !self.boundaries.is_empty() && self.keep.len() == self.rates0.len() {
-                let mut j = 0;
-                for i in 0..self.keep.len() {
+                let first = self.keep.iter().position(|&k| !k).unwrap_or(self.keep.len());
+                let mut j = first;
+                for i in first..self.keep.len() {
                     if self.keep[i] {
                         self.rates0[j] = self.rates0[i];
                         j += 1;
