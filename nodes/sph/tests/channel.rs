@@ -152,6 +152,12 @@ fn results_are_bit_identical_for_any_thread_count_and_serial() {
         let b = run(par, th);
         assert_eq!(a, b, "parallel={par} threads={th}");
     }
+    // From outside any pool (as a node or an example calls it): `advance_to` runs its steps on a
+    // worker of the global pool.
+    let (cfg, params) = channel(10, 0.0);
+    let mut s = Solver::new(SphParams { parallel: true, ..params }, cfg.build(), 0.0).expect("valid");
+    s.advance_to(0.01).expect("no blow-up");
+    assert_eq!(a, s.particles, "global pool of {} threads, called from outside it", rayon::current_num_threads());
 }
 
 /// The per-particle passes of a step (predictor, corrector, shifting, time-step criteria) run in
