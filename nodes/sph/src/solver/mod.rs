@@ -854,7 +854,7 @@ impl Solver {
     /// they are split evenly so no tiny step is taken). Returns the report of the last step.
     ///
     /// With `parallel` and more than one rayon thread, called from outside a rayon pool, the steps
-    /// run on a worker of the global pool (the same bits; carotid on 2 threads +16 %, PERF.md).
+    /// run on a worker of the global pool (the same bits; carotid on 2 threads +14 %, PERF.md).
     /// Prefer it to calling [`Self::step`] in a loop from outside a pool.
     pub fn advance_to(&mut self, t_target: Real) -> Result<Option<StepReport>, SphError> {
         if t_target.is_nan() || t_target < self.time {
