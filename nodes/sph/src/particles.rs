@@ -119,28 +119,16 @@ impl Particles {
 
     /// Keeps the particles for which `keep(i)` is true, in their order.
     pub fn retain_indices(&mut self, keep: &[bool]) {
-        // the prefix before the first removed particle stays where it is
-        let first = keep.iter().position(|&k| !k).unwrap_or(keep.len());
-        fn filt<T: Copy>(v: &mut Vec<T>, keep: &[bool], first: usize) {
-            let start = first.min(v.len());
-            let mut j = start;
-            for i in start..v.len() {
-                if keep[i] {
-                    v[j] = v[i];
-                    j += 1;
-                }
-            }
-            v.truncate(j);
-        }
-        filt(&mut self.x, keep, first);
-        filt(&mut self.z, keep, first);
-        filt(&mut self.vx, keep, first);
-        filt(&mut self.vz, keep, first);
-        filt(&mut self.rho, keep, first);
-        filt(&mut self.mass, keep, first);
-        filt(&mut self.kind, keep, first);
-        filt(&mut self.id, keep, first);
-        filt(&mut self.group, keep, first);
+        let first = first_removed(keep);
+        retain_from(&mut self.x, keep, first);
+        retain_from(&mut self.z, keep, first);
+        retain_from(&mut self.vx, keep, first);
+        retain_from(&mut self.vz, keep, first);
+        retain_from(&mut self.rho, keep, first);
+        retain_from(&mut self.mass, keep, first);
+        retain_from(&mut self.kind, keep, first);
+        retain_from(&mut self.id, keep, first);
+        retain_from(&mut self.group, keep, first);
     }
 
     /// Reorders all arrays so that particle `order[k]` becomes particle k (`order` a permutation).
@@ -187,4 +175,24 @@ impl Particles {
     pub fn fluid_count(&self) -> usize {
         self.kind.iter().filter(|k| k.is_fluid()).count()
     }
+}
+
+/// Index of the first `false` in `keep` (its length if none): the prefix before it stays in place
+/// when compacting with [`retain_from`].
+pub(crate) fn first_removed(keep: &[bool]) -> usize {
+    keep.iter().position(|&k| !k).unwrap_or(keep.len())
+}
+
+/// Keeps the entries of `v` whose `keep` flag is true, in order, moving only those from `first`
+/// ([`first_removed`]) on.
+pub(crate) fn retain_from<T: Copy>(v: &mut Vec<T>, keep: &[bool], first: usize) {
+    let start = first.min(v.len());
+    let mut j = start;
+    for i in start..v.len() {
+        if keep[i] {
+            v[j] = v[i];
+            j += 1;
+        }
+    }
+    v.truncate(j);
 }

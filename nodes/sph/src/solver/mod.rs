@@ -827,15 +827,8 @@ impl Solver {
         if single {
             // keep the carried rates aligned with the particles the exchange removed and created
             if !self.boundaries.is_empty() && self.keep.len() == self.rates0.len() {
-                let first = self.keep.iter().position(|&k| !k).unwrap_or(self.keep.len());
-                let mut j = first;
-                for i in first..self.keep.len() {
-                    if self.keep[i] {
-                        self.rates0[j] = self.rates0[i];
-                        j += 1;
-                    }
-                }
-                self.rates0.truncate(j);
+                let first = crate::particles::first_removed(&self.keep);
+                crate::particles::retain_from(&mut self.rates0, &self.keep, first);
             }
             self.rates0.resize(self.particles.len(), Rate::default());
             self.carried = true;
