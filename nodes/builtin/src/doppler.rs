@@ -75,7 +75,7 @@ pub fn wire_clutter_kind(kind: u32) -> u32 {
 type Message<H> = (H, Vec<f32>);
 
 /// The messages of one packet: one Doppler map per look, then the vector field.
-pub fn packet_messages(r: PacketProducts) -> (Vec<Message<DopplerMapHeaderV2>>, Message<VectorFieldHeaderV2>) {
+pub fn packet_messages(r: PacketProducts) -> PacketMessages {
     let n = r.grid.nx * r.grid.nz;
     let grid = sonoflow_messages::GridV1 {
         x0: r.grid.x0,
@@ -205,9 +205,26 @@ fn packet_notes(r: &PacketProducts, warned_short: &mut bool) -> Vec<String> {
     notes
 }
 
-pub fn run(mut kit: Kit) -> anyhow::Result<()> {
-    let p: PacketParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
-    let mut assembler = PacketAssembler::new(p)?;
+/// The messages of one packet: the Doppler maps (one per look, or none), then the vector field.
+pub type PacketMessages = (Vec<Message<DopplerMapHeaderV2>>, Message<VectorFieldHeaderV2>);
+
+/// A per-packet estimator behind the `iq` → `vector` (+ optional `maps`) ports: the library's
+/// assembler and how its products become messages. [`run_packet_node`] does the rest.
+pub trait PacketEstimator {
+    /// What the assembler returns per finished packet.
+    type Products;
+    /// Adds one image; the finished previous packet if this image starts a new one.
+    fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> anyhow::Result<Option<Self::Products>>;
+    /// Finishes the pending packet at the end of the stream.
+    fn finish(&mut self) -> anyhow::Result<Option<Self::Products>>;
+    /// The packet's messages (the estimator may log about the packet here).
+    fn messages(&mut self, r: Self::Products) -> PacketMessages;
+}
+
+/// The node loop shared by the per-packet estimators: reads I/Q frames, publishes each finished
+/// packet's maps (if `maps` is connected) and vector field with the process CPU time the packet
+/// cost, then end-of-stream on every output.
+pub fn run_packet_node<E: PacketEstimator>(mut kit: Kit, mut est: E) -> anyhow::Result<()> {
     let mut input = kit.input::<IqFrame>("iq")?;
     let mut vout = kit.output::<VectorField>("vector")?;
     let mut mout = match kit.cfg.outputs.contains_key("maps") {
@@ -218,12 +235,7 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
         Some(m) => kit.handshake(&mut [&mut input, &mut vout, m])?,
         None => kit.handshake(&mut [&mut input, &mut vout])?,
     }
-    let mut warned_short = false;
-    let mut publish = |kit: &mut Kit, r: PacketProducts, compute: u64| -> anyhow::Result<()> {
-        for line in packet_notes(&r, &mut warned_short) {
-            eprintln!("{line}");
-        }
-        let (maps, (mut vh, planes)) = packet_messages(r);
+    let mut publish = |kit: &mut Kit, (maps, (mut vh, planes)): PacketMessages, compute: u64| -> anyhow::Result<()> {
         if let Some(m) = mout.as_mut() {
             for (mut h, planes) in maps {
                 h.common.compute_ns = compute;
@@ -241,19 +253,20 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     for_each(&mut kit, &mut input, |kit, sample| {
         let t0 = process_cpu_ns();
         let h = *sample.user_header();
-        let done = assembler.push(&look_header(&h), to_c32(sample.payload()))?;
+        let done = est.push(&look_header(&h), to_c32(sample.payload()))?;
         kit.stats.messages_in += 1;
         acc_ns += process_cpu_ns() - t0;
         if let Some(r) = done {
-            publish(kit, r, acc_ns)?;
+            publish(kit, est.messages(r), acc_ns)?;
             acc_ns = 0;
         }
         last_t = h.common.t_valid;
         Ok(Flow::Continue)
     })?;
     let t0 = process_cpu_ns();
-    if let Some(r) = assembler.finish()? {
-        publish(&mut kit, r, acc_ns + process_cpu_ns() - t0)?;
+    if let Some(r) = est.finish()? {
+        let compute = acc_ns + process_cpu_ns() - t0;
+        publish(&mut kit, est.messages(r), compute)?;
     }
     vout.publish_eos(last_t)?;
     if let Some(m) = mout.as_mut() {
@@ -261,6 +274,34 @@ pub fn run(mut kit: Kit) -> anyhow::Result<()> {
     }
     kit.finish_after(&input)?;
     Ok(())
+}
+
+/// The `doppler` node's estimator: the packet assembler, and whether the short-packet note was
+/// printed.
+struct Doppler {
+    assembler: PacketAssembler,
+    warned_short: bool,
+}
+
+impl PacketEstimator for Doppler {
+    type Products = PacketProducts;
+    fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> anyhow::Result<Option<PacketProducts>> {
+        Ok(self.assembler.push(h, frame)?)
+    }
+    fn finish(&mut self) -> anyhow::Result<Option<PacketProducts>> {
+        Ok(self.assembler.finish()?)
+    }
+    fn messages(&mut self, r: PacketProducts) -> PacketMessages {
+        for line in packet_notes(&r, &mut self.warned_short) {
+            eprintln!("{line}");
+        }
+        packet_messages(r)
+    }
+}
+
+pub fn run(kit: Kit) -> anyhow::Result<()> {
+    let p: PacketParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    run_packet_node(kit, Doppler { assembler: PacketAssembler::new(p)?, warned_short: false })
 }
 
 #[cfg(test)]

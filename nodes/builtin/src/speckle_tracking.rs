@@ -7,16 +7,16 @@
 //! 1 − correlation as variance, flags, projection (0, −1)), so that a launch file swaps it in for
 //! `doppler` unchanged and the evaluator scores it the same way.
 
-use sonoflow_doppler::{SpeckleAssembler, SpeckleParams, SpeckleProducts};
-use sonoflow_messages::types::{DopplerMap as DopplerMapMsg, IqFrame, VectorField};
+use sonoflow_beamform::C32;
+use sonoflow_doppler::{LookHeader, SpeckleAssembler, SpeckleParams, SpeckleProducts};
 use sonoflow_messages::MessageType::*;
 use sonoflow_messages::{
     plane, DopplerMapHeaderV2, GridV1, MsgHeaderV1, VectorFieldHeaderV2, ESTIMATOR_SPECKLE_TRACKING, VECTOR_RAW,
 };
 use sonoflow_node_kit::PortDir::*;
-use sonoflow_node_kit::{for_each, parse_params, port, process_cpu_ns, Flow, KindSpec, Kit};
+use sonoflow_node_kit::{parse_params, port, KindSpec, Kit};
 
-use crate::doppler::{look_header, to_c32, wire_clutter_kind};
+use crate::doppler::{run_packet_node, wire_clutter_kind, PacketEstimator, PacketMessages};
 
 /// The `speckle-tracking` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -114,56 +114,29 @@ pub fn packet_messages(
     ((mh, mp), (vh, vp))
 }
 
-pub fn run(mut kit: Kit) -> anyhow::Result<()> {
-    let p: SpeckleParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
-    let mut assembler = SpeckleAssembler::new(p.clone())?;
-    let mut input = kit.input::<IqFrame>("iq")?;
-    let mut vout = kit.output::<VectorField>("vector")?;
-    let mut mout = match kit.cfg.outputs.contains_key("maps") {
-        true => Some(kit.output::<DopplerMapMsg>("maps")?),
-        false => None,
-    };
-    match mout.as_mut() {
-        Some(m) => kit.handshake(&mut [&mut input, &mut vout, m])?,
-        None => kit.handshake(&mut [&mut input, &mut vout])?,
+/// The `speckle-tracking` node's estimator: the assembler and its parameters.
+struct Speckle {
+    assembler: SpeckleAssembler,
+    params: SpeckleParams,
+}
+
+impl PacketEstimator for Speckle {
+    type Products = SpeckleProducts;
+    fn push(&mut self, h: &LookHeader, frame: Vec<C32>) -> anyhow::Result<Option<SpeckleProducts>> {
+        Ok(self.assembler.push(h, frame)?)
     }
-    let mut publish = |kit: &mut Kit, r: SpeckleProducts, compute: u64| -> anyhow::Result<()> {
-        let ((mut mh, mp), (mut vh, vp)) = packet_messages(&r, &p);
-        if let Some(m) = mout.as_mut() {
-            mh.common.compute_ns = compute;
-            m.publish_copy(mh, &mp)?;
-            kit.stats.messages_out += 1;
-        }
-        vh.common.compute_ns = compute;
-        vout.publish_copy(vh, &vp)?;
-        kit.stats.messages_out += 1;
-        kit.stats.bytes_out += (vp.len() * 4) as u64;
-        Ok(kit.record(vh.common.frame_id, vh.common.t_valid, compute)?)
-    };
-    let (mut last_t, mut acc_ns) = (0.0, 0u64);
-    for_each(&mut kit, &mut input, |kit, sample| {
-        let t0 = process_cpu_ns();
-        let h = *sample.user_header();
-        let done = assembler.push(&look_header(&h), to_c32(sample.payload()))?;
-        kit.stats.messages_in += 1;
-        acc_ns += process_cpu_ns() - t0;
-        if let Some(r) = done {
-            publish(kit, r, acc_ns)?;
-            acc_ns = 0;
-        }
-        last_t = h.common.t_valid;
-        Ok(Flow::Continue)
-    })?;
-    let t0 = process_cpu_ns();
-    if let Some(r) = assembler.finish()? {
-        publish(&mut kit, r, acc_ns + process_cpu_ns() - t0)?;
+    fn finish(&mut self) -> anyhow::Result<Option<SpeckleProducts>> {
+        Ok(self.assembler.finish()?)
     }
-    vout.publish_eos(last_t)?;
-    if let Some(m) = mout.as_mut() {
-        m.publish_eos(last_t)?;
+    fn messages(&mut self, r: SpeckleProducts) -> PacketMessages {
+        let (map, vector) = packet_messages(&r, &self.params);
+        (vec![map], vector)
     }
-    kit.finish_after(&input)?;
-    Ok(())
+}
+
+pub fn run(kit: Kit) -> anyhow::Result<()> {
+    let params: SpeckleParams = parse_params(&kit.cfg.params).map_err(anyhow::Error::msg)?;
+    run_packet_node(kit, Speckle { assembler: SpeckleAssembler::new(params.clone())?, params })
 }
 
 #[cfg(test)]
