@@ -10,7 +10,8 @@
 
 use std::f64::consts::PI;
 
-use super::{spline_at, spline_second_derivatives, DasParams, TxWave};
+use super::transmit::{spline_at, spline_second_derivatives};
+use super::{DasParams, TxWave};
 use crate::error::{invalid, BeamformError, Result};
 use crate::grid::Grid;
 
