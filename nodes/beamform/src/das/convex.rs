@@ -10,7 +10,7 @@
 
 use std::f64::consts::PI;
 
-use super::transmit::{spline_at, spline_second_derivatives};
+use super::transmit::{lane_argmin, spline_at, spline_second_derivatives};
 use super::{DasParams, TxWave};
 use crate::error::{invalid, BeamformError, Result};
 use crate::grid::Grid;
@@ -293,39 +293,15 @@ pub(crate) fn tx_points(p: &DasParams, tx: &TxWave) -> (Vec<f64>, Vec<f64>, Vec<
 }
 
 /// `min_i (d_i + √((x_i − x)² + (z_i − z)²))` and the first index attaining it: the linear
-/// array's `points_min` for transmit points off z = 0 (8 lanes, merged by value then index).
+/// array's `points_min` for transmit points off z = 0 ([`lane_argmin`]).
 #[inline(always)]
 fn points_min_xz(xs: &[f64], zs: &[f64], d: &[f64], x: f64, z: f64) -> (f64, usize) {
-    const L: usize = 8;
     let n = xs.len().min(zs.len()).min(d.len());
     let (xs, zs, d) = (&xs[..n], &zs[..n], &d[..n]);
-    let mut lv = [f64::INFINITY; L];
-    let mut li = [0.0f64; L];
-    for (c, ((xc, zc), dc)) in xs.chunks_exact(L).zip(zs.chunks_exact(L)).zip(d.chunks_exact(L)).enumerate() {
-        let cf = c as f64;
-        for j in 0..L {
-            let (dx, dz) = (xc[j] - x, zc[j] - z);
-            let v = dc[j] + (dx * dx + dz * dz).sqrt();
-            let better = v < lv[j];
-            lv[j] = if better { v } else { lv[j] };
-            li[j] = if better { cf } else { li[j] };
-        }
-    }
-    let mut best = (f64::INFINITY, usize::MAX);
-    for j in 0..L {
-        let i = li[j] as usize * L + j;
-        if lv[j] < best.0 || (lv[j] == best.0 && lv[j] < f64::INFINITY && i < best.1) {
-            best = (lv[j], i);
-        }
-    }
-    for i in n - n % L..n {
+    lane_argmin(n, |i| {
         let (dx, dz) = (xs[i] - x, zs[i] - z);
-        let v = d[i] + (dx * dx + dz * dz).sqrt();
-        if v < best.0 {
-            best = (v, i);
-        }
-    }
-    (best.0, if best.1 == usize::MAX { 0 } else { best.1 })
+        d[i] + (dx * dx + dz * dz).sqrt()
+    })
 }
 
 /// `(d_TX, ∂d_TX/∂x, ∂d_TX/∂z)` at (x, z) from transmit points off z = 0: d_TX is PyMUST's

@@ -48,24 +48,21 @@ pub(crate) fn spline_at(y: &[f64], m2: &[f64], k: usize, u: f64) -> f64 {
     (1.0 - u) * y[k] + u * y[k + 1] + (((1.0 - u).powi(3) - (1.0 - u)) * m2[k] + (u.powi(3) - u) * m2[k + 1]) / 6.0
 }
 
-/// `min_i (d_i + √((x_i − x)² + z²))` and the first index attaining it, as a plain scan would
-/// find them: 8 independent lanes each keep their smallest value and its first index (the same
-/// expression, branch-free, so it vectorises), then the lanes are merged by value and, on ties,
-/// by index; the tail is scanned after them.
+/// The smallest of `value(0) … value(n − 1)` and the first index attaining it, as a plain scan
+/// would find them: 8 independent lanes each keep their smallest value and its first index (the
+/// same expression, branch-free, so it vectorises when `value` reads slices of length ≥ `n` at
+/// index `i`), then the lanes are merged by value and, on ties, by index; the tail is scanned
+/// after them. Index 0 if every value is +∞ or NaN.
 #[inline(always)]
-fn points_min(xs: &[f64], d: &[f64], x: f64, z: f64) -> (f64, usize) {
+pub(crate) fn lane_argmin(n: usize, value: impl Fn(usize) -> f64) -> (f64, usize) {
     const L: usize = 8;
-    let n = xs.len().min(d.len());
-    let (xs, d) = (&xs[..n], &d[..n]);
-    let z2 = z * z;
     let mut lv = [f64::INFINITY; L];
     // the chunk index as f64 (exact below 2^53), so the select is a vector blend
     let mut li = [0.0f64; L];
-    for (c, (xc, dc)) in xs.chunks_exact(L).zip(d.chunks_exact(L)).enumerate() {
+    for c in 0..n / L {
         let cf = c as f64;
         for j in 0..L {
-            let dx = xc[j] - x;
-            let v = dc[j] + (dx * dx + z2).sqrt();
+            let v = value(c * L + j);
             let better = v < lv[j];
             lv[j] = if better { v } else { lv[j] };
             li[j] = if better { cf } else { li[j] };
@@ -79,13 +76,24 @@ fn points_min(xs: &[f64], d: &[f64], x: f64, z: f64) -> (f64, usize) {
         }
     }
     for i in n - n % L..n {
-        let dx = xs[i] - x;
-        let v = d[i] + (dx * dx + z2).sqrt();
+        let v = value(i);
         if v < best.0 {
             best = (v, i);
         }
     }
     (best.0, if best.1 == usize::MAX { 0 } else { best.1 })
+}
+
+/// `min_i (d_i + √((x_i − x)² + z²))` and the first index attaining it ([`lane_argmin`]).
+#[inline(always)]
+fn points_min(xs: &[f64], d: &[f64], x: f64, z: f64) -> (f64, usize) {
+    let n = xs.len().min(d.len());
+    let (xs, d) = (&xs[..n], &d[..n]);
+    let z2 = z * z;
+    lane_argmin(n, |i| {
+        let dx = xs[i] - x;
+        d[i] + (dx * dx + z2).sqrt()
+    })
 }
 
 /// Transmit distance and its gradient, per pixel.
