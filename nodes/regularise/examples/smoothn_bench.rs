@@ -5,58 +5,20 @@
 //! cargo run --release -p sonoflow-regularise --example smoothn_bench -- \
 //!     [--in field.npy] [--out smoothed.npy] [--ny 200] [--nx 200] [--repeats 20] [--flavour matlab|pymust]
 //! ```
-//! `--in` reads a float64 C-order `.npy` of shape (components, ny, nx) (as written by
-//! `bench/smoothn/side_by_side.py`); without it the field is generated from a fixed seed. Prints one
-//! JSON line with the timings (ms) and the result summary.
+//! `--in` reads a real `.npy` of shape (components, ny, nx) (as written by
+//! `bench/smoothn/side_by_side.py`; any real dtype, C or Fortran order, read by sonoflow-fileio);
+//! without it the field is generated from a fixed seed. Prints one JSON line with the timings (ms)
+//! and the result summary.
+use std::path::Path;
 use std::time::Instant;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+use sonoflow_fileio::npy;
 use sonoflow_regularise::{Flavour, Smoothn, SmoothnParams};
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
-
-fn read_npy(path: &str) -> Res<(Vec<usize>, Vec<f64>)> {
-    let bytes = std::fs::read(path)?;
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(format!("{path}: not an .npy file").into());
-    }
-    let (len, start) = if bytes[6] == 1 {
-        (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10)
-    } else {
-        (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12)
-    };
-    let header = std::str::from_utf8(bytes.get(start..start + len).ok_or("truncated header")?)?;
-    if !header.contains("'<f8'") || header.contains("'fortran_order': True") {
-        return Err(format!("{path}: need float64 C-order, got {header}").into());
-    }
-    let dims = header.split("'shape': (").nth(1).and_then(|s| s.split(')').next()).ok_or("no shape")?;
-    let shape =
-        dims.split(',').map(str::trim).filter(|s| !s.is_empty()).map(str::parse).collect::<Result<Vec<usize>, _>>()?;
-    let mut data = Vec::with_capacity(shape.iter().product());
-    for c in bytes[start + len..].chunks_exact(8) {
-        data.push(f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]));
-    }
-    if data.len() != shape.iter().product::<usize>() {
-        return Err(format!("{path}: {} values for shape {shape:?}", data.len()).into());
-    }
-    Ok((shape, data))
-}
-
-fn write_npy(path: &str, shape: &[usize], data: &[f64]) -> Res<()> {
-    let dims: String = shape.iter().map(|d| format!("{d}, ")).collect();
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({}), }}", dims.trim_end_matches(' '));
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&u16::try_from(header.len())?.to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    data.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
-    Ok(std::fs::write(path, out)?)
-}
 
 /// Smooth 2-component field + N(0, 0.1²) noise + 10 % outliers uniform in ±2.5.
 fn generate(ny: usize, nx: usize) -> Vec<f64> {
@@ -86,7 +48,10 @@ fn main() -> Res<()> {
         Some(other) => return Err(format!("--flavour {other}: expected matlab or pymust").into()),
     };
     let (shape, data) = match arg("--in") {
-        Some(path) => read_npy(&path)?,
+        Some(path) => {
+            let a = npy::read(Path::new(&path))?;
+            (a.shape, a.data)
+        }
         None => {
             let ny: usize = arg("--ny").map_or(Ok(200), |s| s.parse())?;
             let nx: usize = arg("--nx").map_or(Ok(200), |s| s.parse())?;
@@ -115,7 +80,7 @@ fn main() -> Res<()> {
     let median = times.get(times.len() / 2).copied().unwrap_or(first_ms);
     let min = times.first().copied().unwrap_or(first_ms);
     if let Some(path) = arg("--out") {
-        write_npy(&path, &shape, &out)?;
+        npy::write_f64(Path::new(&path), &shape, &out)?;
     }
     println!(
         "{{\"shape\": {shape:?}, \"threads\": {}, \"flavour\": \"{flavour:?}\", \"plan_ms\": {plan_ms:.3}, \"first_ms\": {first_ms:.3}, \
