@@ -9,11 +9,13 @@
 
 Per packet and (transmit, receive) angle pair it calls sonoflow's lag-L slow-time
 autocorrelation (`sonoflow.doppler_maps`, the built-in estimator's code, paper 1 eq. 19), then
-solves the least-squares (vx, vz) over the looks with the nominal plane-wave projection
-a = −(sin θt + sin θr, cos θt + cos θr)/2 in numpy, and publishes one Doppler map per look and
-the vector field (planes vx, vz, flags, power), as the built-in node does with
-`projection = "nominal"`. Params: `lag` (1 … 16); `projection` is accepted and must be
-"nominal" (the only projection implemented here).
+solves the least-squares (vx, vz) over the looks in numpy and publishes one Doppler map per look
+and the vector field (planes vx, vz, flags, power), as the built-in node does. The projection a
+(the velocity a look measures is a · (vx, vz)) is, as in the built-in node, per pixel through the
+receive aperture the I/Q header carries (`sonoflow.look_projection`, `projection = "aperture"`,
+the default) or the nominal plane wave a = −(sin θt + sin θr, cos θt + cos θr)/2
+(`projection = "nominal"`, also where a header carries no aperture). Params: `lag` (1 … 16),
+`projection`.
 """
 
 import time
@@ -26,7 +28,7 @@ C = sf.node.CONSTANTS
 NO_ESTIMATE = 1
 
 
-def estimate(node, looks, lag):
+def estimate(node, looks, lag, projection):
     t0 = time.thread_time_ns()
     first = next(iter(looks.values()))["header"]
     g = first["grid"]
@@ -43,10 +45,15 @@ def estimate(node, looks, lag):
         h = look["header"]
         packet = np.stack([f.reshape(nz, nx) for f in look["frames"]], axis=2)
         v, _var, p, flags = sf.doppler_maps(packet, {"fc": h["fc"], "c": h["c"], "PRF": h["prf"]}, 1, lag)
-        a0 = -(np.sin(h["tx_angle"]) + np.sin(h["rx_angle"])) / 2
-        a1 = -(np.cos(h["tx_angle"]) + np.cos(h["rx_angle"])) / 2
+        a = sf.look_projection(h) if projection == "aperture" else None
+        if a is None:
+            a0 = np.full(n, -(np.sin(h["tx_angle"]) + np.sin(h["rx_angle"])) / 2)
+            a1 = np.full(n, -(np.cos(h["tx_angle"]) + np.cos(h["rx_angle"])) / 2)
+        else:
+            a0, a1 = (a[i].reshape(-1).astype(np.float64) for i in (0, 1))
         ok = (flags.reshape(-1) & NO_ESTIMATE) == 0
         vd = v.reshape(-1).astype(np.float64)
+        a0, a1 = a0[ok], a1[ok]
         ata[0, ok] += a0 * a0
         ata[1, ok] += a0 * a1
         ata[2, ok] += a1 * a1
@@ -89,19 +96,20 @@ def main():
         lag = node.params.get("lag", 1)
         if not (isinstance(lag, int) and 1 <= lag <= 16):
             raise SystemExit(f"lag_estimator: params.lag = {lag!r} is out of range: 1 ..= 16")
-        if node.params.get("projection", "nominal") != "nominal":
-            raise SystemExit("lag1_estimator: params.projection must be \"nominal\" (the only one implemented)")
+        projection = node.params.get("projection", "aperture")
+        if projection not in ("aperture", "nominal"):
+            raise SystemExit(f"lag1_estimator: params.projection = {projection!r}: \"aperture\" or \"nominal\"")
         looks, packet = {}, None
         for m in node.messages("iq"):
             h = m.header
             if packet is not None and h["packet"] != packet:
-                estimate(node, looks, lag)
+                estimate(node, looks, lag, projection)
                 looks = {}
             packet = h["packet"]
             key = (h["tx_angle"], h["rx_angle"])
             looks.setdefault(key, {"header": h, "frames": []})["frames"].append(m.data)
         if looks:
-            estimate(node, looks, lag)
+            estimate(node, looks, lag, projection)
 
 
 if __name__ == "__main__":

@@ -431,6 +431,40 @@ fn genscat<'py>(
     ))
 }
 
+/// Per-pixel Doppler projection vectors `a = (a_x, a_z)` — the velocity a look measures is
+/// `a · (vx, vz)` — of a plane wave transmitted at `tx_angle` and received at `rx_angle` (rad)
+/// through the receive aperture `aperture_json` (`sonoflow_doppler::Aperture`: pitch,
+/// n_elements, fnumber, width, radius, apodization) at `fc` and `c`, on the grid `grid_json`:
+/// what the built-in `doppler` node uses with `projection = "aperture"` (its default). Returns
+/// float32 (2, nz, nx); a pixel no element reaches gets (0, 0).
+#[pyfunction]
+fn aperture_projection<'py>(
+    py: Python<'py>,
+    aperture_json: &str,
+    fc: f64,
+    c: f64,
+    tx_angle: f64,
+    rx_angle: f64,
+    grid_json: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let aperture: sonoflow_doppler::Aperture = from_json("aperture", aperture_json)?;
+    let grid: Grid = from_json("grid", grid_json)?;
+    grid.validate().map_err(|e| value_error("grid", e))?;
+    for (name, a) in [("tx_angle", tx_angle), ("rx_angle", rx_angle)] {
+        if !(a.is_finite() && a.abs() < std::f64::consts::FRAC_PI_2) {
+            return Err(value_error(name, format!("{a}: expected finite, |angle| < pi/2 rad")));
+        }
+    }
+    let a = compute(py, || sonoflow_doppler::aperture_projection(&aperture, fc, c, tx_angle, rx_angle, &grid))
+        .map_err(|e| value_error("aperture_projection", e))?;
+    let n = a.len();
+    let mut planes = Vec::with_capacity(2 * n);
+    planes.extend(a.iter().map(|p| p[0]));
+    planes.extend(a.iter().map(|p| p[1]));
+    let arr = PyArray1::from_vec(py, planes);
+    Ok(arr.reshape([2, grid.nz, grid.nx])?.into_any())
+}
+
 /// Least-squares vector velocity from Doppler maps (n_looks, nz, nx) float32 (positive toward
 /// the probe) with the nominal plane-wave projections of (tx, rx) angle pairs (rad), optional
 /// flags (n_looks, nz, nx) uint8 (bit 0: no estimate) and per-look weights. Returns (vx, vz,
@@ -635,6 +669,7 @@ fn wire_constants() -> BTreeMap<&'static str, u32> {
         ("PLANE_PROJECTION_X", plane::PROJECTION_X),
         ("PLANE_PROJECTION_Z", plane::PROJECTION_Z),
         ("VECTOR_RAW", sonoflow_messages::VECTOR_RAW),
+        ("APODIZATION_HANN", sonoflow_messages::APODIZATION_HANN),
         ("VECTOR_REGULARISED", sonoflow_messages::VECTOR_REGULARISED),
         ("VECTOR_TRUTH", sonoflow_messages::VECTOR_TRUTH),
         ("FLAG_END_OF_STREAM", sonoflow_messages::FLAG_END_OF_STREAM),
@@ -809,6 +844,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(pfield, m)?)?;
     m.add_function(wrap_pyfunction!(smoothn, m)?)?;
     m.add_function(wrap_pyfunction!(vector_doppler, m)?)?;
+    m.add_function(wrap_pyfunction!(aperture_projection, m)?)?;
     m.add_function(wrap_pyfunction!(wire_layout, m)?)?;
     m.add_class::<RecordingReader>()?;
     m.add_class::<MessageIter>()?;

@@ -98,19 +98,21 @@ def test_run_reports_bad_input_before_starting(tmp_path):
         sf.run(os.path.join(ROOT, "launch", "quickstart.toml"), set={"doppler.alias_fraction": float("nan")})
 
 
-def test_python_estimator_swaps_in_and_agrees_with_the_built_in(tmp_path):
+@pytest.mark.parametrize("projection", ["aperture", "nominal"])
+def test_python_estimator_swaps_in_and_agrees_with_the_built_in(tmp_path, projection):
     """The example estimator (examples/lag1_estimator.py: sonoflow's lag-1 autocorrelation per
-    look, least squares in numpy) as an `exec` node in place of the built-in `doppler` node with
-    the nominal projection: the same vector field to < 1e-5 m/s (both sum in f64 and round to
-    f32, in a different order: a few f32 ulps of the 0.77 m/s Nyquist velocity). One packet of
-    32 frames × 2 looks in (64 I/Q frames), 2 maps + 1 vector field out."""
+    look, least squares in numpy) as an `exec` node in place of the built-in `doppler` node, with
+    the per-pixel aperture projection (`sonoflow.look_projection`, the default) and the nominal
+    one: the same vector field to < 1e-5 m/s (both sum in f64 and round to f32, in a different
+    order: a few f32 ulps of the 0.77 m/s Nyquist velocity). One packet of 32 frames × 2 looks in
+    (64 I/Q frames), 2 maps + 1 vector field out."""
     text = open(os.path.join(ROOT, "launch", "quickstart.toml"), encoding="utf-8").read()
     example = os.path.join(ROOT, "nodes", "python", "examples", "lag1_estimator.py")
     text += (f'\n[nodes.doppler.variants.python]\nexec = {sys.executable!r}\nargs = [{example!r}]\n'
              'ports = { iq = "IqFrameV3", vector = "VectorFieldV2", maps = "DopplerMapV2" }\n')
     launch = tmp_path / "quickstart-python.toml"
     launch.write_text(text.replace("'", '"'), encoding="utf-8")
-    common = {"flow.schedule.n_packets": 1, "flow.density_per_mm2": 4.0, "doppler.projection": "nominal"}
+    common = {"flow.schedule.n_packets": 1, "flow.density_per_mm2": 4.0, "doppler.projection": projection}
     runs = {}
     for name, swap in (("builtin", None), ("python", {"doppler": "python"})):
         res = sf.run(str(launch), set=common, swap=swap, out=tmp_path / name, echo=False)

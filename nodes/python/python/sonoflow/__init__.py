@@ -14,7 +14,8 @@ while they compute; ``set_threads(n)`` sets the worker threads (0 = one per core
 Graphs and recordings: ``run(launch_file, set=..., swap=..., out=...)`` runs a graph with the
 ``sonoflow`` executable and returns its report; ``Recording(path)`` reads a recording's messages
 as numpy arrays with their decoded headers; ``Node()`` makes the running program a node of a
-graph (a launch file's ``exec`` node: an estimator written in Python).
+graph (a launch file's ``exec`` node: an estimator written in Python); ``look_projection(header)``
+gives such an estimator the built-in ``doppler`` node's per-pixel projections of a look.
 """
 
 from . import _native
@@ -22,11 +23,12 @@ from ._param import Options, Param
 from .graph import run
 from .must import (bmode, das, dasmtx, doppler_maps, genscat, getparam, iq2doppler, pfield, probes, rf2iq, simus,
                    smoothn, sptrack, tgc, txdelay, vector_doppler)
-from .node import Node
+from .node import Node, look_projection
 from .recording import Message, Recording
 
 __all__ = ["Param", "Options", "getparam", "probes", "txdelay", "simus", "rf2iq", "das", "dasmtx", "iq2doppler",
-           "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat", "pfield", "sptrack", "set_threads", "threads", "run", "Recording", "Message", "Node"]
+           "doppler_maps", "vector_doppler", "smoothn", "bmode", "tgc", "genscat", "pfield", "sptrack", "set_threads", "threads", "run", "Recording", "Message", "Node",
+           "look_projection"]
 
 
 def set_threads(n):

@@ -48,6 +48,36 @@ def _fill(arr, value, path):
         target[...] = v
 
 
+def look_projection(header):
+    """The per-pixel Doppler projection vectors of the look an I/Q frame header describes: float32
+    (2, nz, nx), ``a_x`` then ``a_z``, the velocity the look measures being ``a · (vx, vz)``,
+    through the receive aperture the header carries (pitch, elements, f-number, element width,
+    convex radius, apodisation) — what the built-in ``doppler`` node uses with its default
+    ``projection = "aperture"``. ``None`` when the header carries no aperture (``n_elements`` 0):
+    then the nominal plane-wave projection ``-(sin θt + sin θr, cos θt + cos θr)/2`` applies."""
+    if not isinstance(header, dict):
+        raise TypeError(f"header: expected the dict of an IqFrameV3 message, got {type(header).__name__}")
+    missing = [k for k in ("n_elements", "pitch", "fnumber", "element_width", "radius", "apodization", "fc", "c",
+                           "tx_angle", "rx_angle", "grid") if k not in header]
+    if missing:
+        raise ValueError(f"header: missing field(s) {', '.join(missing)} (an IqFrameV3 header is needed)")
+    if int(header["n_elements"]) == 0:
+        return None
+    width, radius = float(header["element_width"]), float(header["radius"])
+    aperture = {
+        "pitch": float(header["pitch"]),
+        "n_elements": int(header["n_elements"]),
+        "fnumber": float(header["fnumber"]),
+        "width": width if width > 0 else None,
+        "radius": radius if np.isfinite(radius) and radius > 0 else None,
+        "apodization": "hann" if int(header["apodization"]) == CONSTANTS["APODIZATION_HANN"] else "boxcar",
+    }
+    grid = {k: header["grid"][k] for k in ("x0", "z0", "dx", "dz", "nx", "nz")}
+    grid = {k: (int(v) if k in ("nx", "nz") else float(v)) for k, v in grid.items()}
+    return _native.aperture_projection(json.dumps(aperture), float(header["fc"]), float(header["c"]),
+                                       float(header["tx_angle"]), float(header["rx_angle"]), json.dumps(grid))
+
+
 class Node:
     """This process as a node of the running graph (see the module's doc)."""
 
