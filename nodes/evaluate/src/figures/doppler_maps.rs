@@ -72,40 +72,28 @@ pub(super) fn doppler_maps_mapped(
             anyhow::bail!("{}: Nyquist velocity {} m/s", p.title, p.nyquist);
         }
     }
-    let cols = panels.len().min(4);
-    let rows = panels.len().div_ceil(cols);
-    let plot_w = 300;
-    let plot_h = panels.iter().map(|p| plot_height(&p.grid, plot_w)).max().unwrap_or(plot_w);
-    let (pw, ph) = panel_size(plot_w, plot_h);
-    let size = (cols as u32 * pw + BAR_W, TITLE_H + rows as u32 * ph);
     let same_vn = panels.iter().all(|p| (p.nyquist - first.nyquist).abs() <= 1e-9 * first.nyquist);
     let outline = outline.filter(|m| panels.iter().all(|p| p.grid == first.grid && m.len() == p.velocity.len()));
     let name = file_name(DOPPLER, label);
-    let maps = render(&dir.join(DIR).join(&name), size, |root| {
-        let (top, rest) = root.split_vertically(TITLE_H);
-        title_row(&top, heading)?;
-        let (grid_area, bar) = rest.split_horizontally(cols as u32 * pw);
-        let mut maps = Vec::new();
-        for (k, p) in panels.iter().enumerate() {
-            let (r, col) = ((k / cols) as i32, (k % cols) as i32);
-            let area = grid_area.clone().shrink((col * pw as i32, r * ph as i32), (pw, ph));
-            let mut c = grid_chart(&area, &p.title, &p.grid)?;
-            let pref = p.power.map(p99).unwrap_or(0.0);
-            draw_cells(&mut c, &p.grid, |i| doppler_pixel(p, i, pref))?;
-            if let Some(m) = outline {
-                draw_outline(&mut c, &p.grid, m, WHITE)?;
-            }
-            maps.push(PanelMap::of(&c));
+    let titled: Vec<(&str, &GridV1)> = panels.iter().map(|p| (p.title.as_str(), &p.grid)).collect();
+    let fill = |k: usize, c: &mut Chart<'_, '_>| {
+        let p = &panels[k];
+        let pref = p.power.map(p99).unwrap_or(0.0);
+        draw_cells(c, &p.grid, |i| doppler_pixel(p, i, pref))?;
+        if let Some(m) = outline {
+            draw_outline(c, &p.grid, m, WHITE)?;
         }
-        let bar = bar.shrink((0, 0), (BAR_W, ph));
+        Ok(())
+    };
+    let bar = |bar: &Area<'_>| {
         if same_vn {
             let vn = first.nyquist;
-            colour_bar(&bar, -vn, vn, "v toward probe (m/s)", |t| doppler_colour(2.0 * t - 1.0))?;
+            colour_bar(bar, -vn, vn, "v toward probe (m/s)", |t| doppler_colour(2.0 * t - 1.0))
         } else {
-            colour_bar(&bar, -1.0, 1.0, "v / v_Nyquist", |t| doppler_colour(2.0 * t - 1.0))?;
+            colour_bar(bar, -1.0, 1.0, "v / v_Nyquist", |t| doppler_colour(2.0 * t - 1.0))
         }
-        Ok(maps)
-    })?;
+    };
+    let (size, maps) = panel_grid(&dir.join(DIR).join(&name), heading, &titled, fill, bar)?;
     let fig = figure(
         &name,
         heading.to_string(),

@@ -35,29 +35,15 @@ pub(super) fn transmit_fields_mapped(
     for p in panels {
         check_grid(&p.grid, &[("db", p.db.len())])?;
     }
-    let cols = panels.len().min(4);
-    let rows = panels.len().div_ceil(cols);
-    let plot_w = 300;
-    let plot_h = panels.iter().map(|p| plot_height(&p.grid, plot_w)).max().unwrap_or(plot_w);
-    let (pw, ph) = panel_size(plot_w, plot_h);
-    let size = (cols as u32 * pw + BAR_W, TITLE_H + rows as u32 * ph);
     let name = file_name(FIELDS, label);
-    let maps = render(&dir.join(DIR).join(&name), size, |root| {
-        let (top, rest) = root.split_vertically(TITLE_H);
-        title_row(&top, heading)?;
-        let (grid_area, bar) = rest.split_horizontally(cols as u32 * pw);
-        let mut maps = Vec::new();
-        for (k, p) in panels.iter().enumerate() {
-            let (r, col) = ((k / cols) as i32, (k % cols) as i32);
-            let area = grid_area.clone().shrink((col * pw as i32, r * ph as i32), (pw, ph));
-            let mut c = grid_chart(&area, &p.title, &p.grid)?;
-            draw_cells(&mut c, &p.grid, |i| field_colour(f64::from(p.db[i])))?;
-            maps.push(PanelMap::of(&c));
-        }
-        let bar = bar.shrink((0, 0), (BAR_W, ph));
-        colour_bar(&bar, -FIELD_DR, 0.0, "RMS pressure (dB re max)", |t| field_colour(FIELD_DR * (t - 1.0)))?;
-        Ok(maps)
-    })?;
+    let titled: Vec<(&str, &GridV1)> = panels.iter().map(|p| (p.title.as_str(), &p.grid)).collect();
+    let (size, maps) = panel_grid(
+        &dir.join(DIR).join(&name),
+        heading,
+        &titled,
+        |k, c| draw_cells(c, &panels[k].grid, |i| field_colour(f64::from(panels[k].db[i]))),
+        |bar| colour_bar(bar, -FIELD_DR, 0.0, "RMS pressure (dB re max)", |t| field_colour(FIELD_DR * (t - 1.0))),
+    )?;
     let fig = figure(
         &name,
         heading.to_string(),

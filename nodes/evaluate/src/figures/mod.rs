@@ -128,6 +128,41 @@ fn render<T>(path: &Path, (w, h): (u32, u32), draw: impl FnOnce(&Area<'_>) -> an
     Ok(out)
 }
 
+/// A figure of grid panels, at most 4 per row, under a title row `heading`, with one colour bar
+/// right of them, rendered to `path`: panel k's chart is made by [`grid_chart`] from
+/// `panels[k]` (title, grid; the tallest grid sets the row height) and filled by `fill(k, chart)`;
+/// `bar(area)` draws the colour bar. Returns the image size and the panels' maps.
+fn panel_grid(
+    path: &Path,
+    heading: &str,
+    panels: &[(&str, &GridV1)],
+    mut fill: impl FnMut(usize, &mut Chart<'_, '_>) -> anyhow::Result<()>,
+    bar: impl FnOnce(&Area<'_>) -> anyhow::Result<()>,
+) -> anyhow::Result<((u32, u32), Vec<PanelMap>)> {
+    let cols = panels.len().clamp(1, 4);
+    let rows = panels.len().div_ceil(cols);
+    let plot_w = 300;
+    let plot_h = panels.iter().map(|(_, g)| plot_height(g, plot_w)).max().unwrap_or(plot_w);
+    let (pw, ph) = panel_size(plot_w, plot_h);
+    let size = (cols as u32 * pw + BAR_W, TITLE_H + rows as u32 * ph);
+    let maps = render(path, size, |root| {
+        let (top, rest) = root.split_vertically(TITLE_H);
+        title_row(&top, heading)?;
+        let (grid_area, bar_area) = rest.split_horizontally(cols as u32 * pw);
+        let mut maps = Vec::with_capacity(panels.len());
+        for (k, (title, grid)) in panels.iter().enumerate() {
+            let (r, col) = ((k / cols) as i32, (k % cols) as i32);
+            let area = grid_area.clone().shrink((col * pw as i32, r * ph as i32), (pw, ph));
+            let mut c = grid_chart(&area, title, grid)?;
+            fill(k, &mut c)?;
+            maps.push(PanelMap::of(&c));
+        }
+        bar(&bar_area.shrink((0, 0), (BAR_W, ph)))?;
+        Ok(maps)
+    })?;
+    Ok((size, maps))
+}
+
 /// RGB8 → PNG bytes (adaptive filters, default deflate: tens of milliseconds per figure).
 pub fn encode_png(rgb: &[u8], w: u32, h: u32) -> anyhow::Result<Vec<u8>> {
     let mut out = Vec::new();
