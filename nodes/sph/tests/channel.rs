@@ -54,6 +54,19 @@ fn poiseuille_run(n: usize, t: Real, with: impl FnOnce(SphParams) -> SphParams) 
     (s, einf, e2)
 }
 
+/// The x velocities ordered by particle id (runs of the same set-up keep the same ids).
+fn vx_by_id(s: &Solver) -> Vec<(u64, Real)> {
+    let mut v: Vec<(u64, Real)> = (0..s.particles.len()).map(|i| (s.particles.id[i], s.particles.vx[i])).collect();
+    v.sort_by_key(|a| a.0);
+    v
+}
+
+/// The largest difference of two [`vx_by_id`] fields, particle by particle.
+fn largest_difference(a: &[(u64, Real)], b: &[(u64, Real)]) -> Real {
+    assert_eq!(a.len(), b.len(), "particle counts differ");
+    a.iter().zip(b).map(|(a, b)| (a.1 - b.1).abs()).fold(0.0, Real::max)
+}
+
 #[test]
 fn poiseuille_start_up_matches_the_series_solution_at_40_particles_across() {
     // Bars (sph-validation.md §a): transient E∞ ≤ 3 % at t = 0.0225 … 0.225 s; steady (t = 1 s)
@@ -318,12 +331,9 @@ fn single_evaluation_integrator_gives_the_same_poiseuille_at_half_the_evaluation
         let (s, einf, e2) = poiseuille_run(40, t, |p| SphParams { integrator, ..p });
         eprintln!("{integrator:?}: E_inf {:.4} %, E2 {:.4} %", 100.0 * einf, 100.0 * e2);
         assert!(einf <= 0.03);
-        let mut by_id: Vec<(u64, Real)> =
-            (0..s.particles.len()).map(|i| (s.particles.id[i], s.particles.vx[i])).collect();
-        by_id.sort_by_key(|a| a.0);
-        fields.push(by_id);
+        fields.push(vx_by_id(&s));
     }
-    let diff = fields[0].iter().zip(&fields[1]).map(|(a, b)| (a.1 - b.1).abs()).fold(0.0, Real::max);
+    let diff = largest_difference(&fields[0], &fields[1]);
     eprintln!("largest velocity difference {:.2e} of u_max", diff / umax);
     assert!(diff < 1e-4 * umax, "{diff}");
 }
@@ -343,12 +353,9 @@ fn symmetric_pair_loop_gives_the_same_poiseuille_as_the_gather() {
         eprintln!("symmetric {symmetric_pairs}: E_inf {:.4} %, E2 {:.4} %", 100.0 * einf, 100.0 * e2);
         assert!(einf <= 0.03);
         errs.push((einf, e2));
-        let mut by_id: Vec<(u64, Real)> =
-            (0..s.particles.len()).map(|i| (s.particles.id[i], s.particles.vx[i])).collect();
-        by_id.sort_by_key(|a| a.0);
-        fields.push(by_id);
+        fields.push(vx_by_id(&s));
     }
-    let diff = fields[0].iter().zip(&fields[1]).map(|(a, b)| (a.1 - b.1).abs()).fold(0.0, Real::max);
+    let diff = largest_difference(&fields[0], &fields[1]);
     eprintln!("largest velocity difference {:.2e} of u_max", diff / umax);
     assert!(diff < 1e-6 * umax, "{diff}");
     assert!((errs[0].0 - errs[1].0).abs() < 1e-5 && (errs[0].1 - errs[1].1).abs() < 1e-5, "{errs:?}");
