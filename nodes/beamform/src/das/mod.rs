@@ -29,8 +29,8 @@
 //! * focused wave at (x0, z0 > 0): virtual-source model `max_e|e − f| ∓ |p − f|` (− above the
 //!   focus, + below it), the physical arrival time (MUST's minimum rule is wrong below the focus);
 //! * arbitrary delays ([`TxWave::Delays`], NaN = element off): PyMUST's rule literally, minimum
-//!   over 4·n_tx points linearly interpolated along the transmitting elements (PyMUST: cubic
-//!   spline for the delays; identical for linear delay laws).
+//!   over 4·n_tx points along the transmitting elements, positions linear in the element index
+//!   and delays by PyMUST's not-a-knot cubic spline (linear below 4 elements).
 //! * convex array: a focused wave by the virtual-source model above, every other wave by its
 //!   MUST delays ([`TxWave::delays`]) and PyMUST's rule, the minimum over 4·n_tx points whose
 //!   positions (x, z) and delays follow the cubic spline through the transmitting elements.

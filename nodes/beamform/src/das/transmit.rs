@@ -151,10 +151,7 @@ impl TxModel {
                         let u = t - k as f64;
                         let (e0, e1) = (on[k], on[k + 1]);
                         x.push(p.element_x(e0) * (1.0 - u) + p.element_x(e1) * u);
-                        let v = (1.0 - u) * yd[k]
-                            + u * yd[k + 1]
-                            + (((1.0 - u).powi(3) - (1.0 - u)) * m2[k] + (u.powi(3) - u) * m2[k + 1]) / 6.0;
-                        d.push(v * p.c);
+                        d.push(spline_at(&yd, &m2, k, u) * p.c);
                     }
                 }
                 TxKind::Points { x, d }
@@ -331,6 +328,35 @@ mod tests {
                 }
                 let got = points_min(&xs, &d, x, z);
                 assert_eq!((got.0.to_bits(), got.1), (best.0.to_bits(), best.1), "n {n} at ({x}, {z})");
+            }
+        }
+    }
+
+    /// The generic scan equals a plain first-strictly-smaller scan on every length 0 … 17 and a
+    /// long one: ties within and across lanes, NaN values (never smaller), all +∞ (index 0).
+    #[test]
+    fn lane_argmin_equals_a_plain_scan() {
+        let plain = |v: &[f64]| {
+            let mut best = (f64::INFINITY, 0usize);
+            for (i, &x) in v.iter().enumerate() {
+                if x < best.0 {
+                    best = (x, i);
+                }
+            }
+            best
+        };
+        let patterns: [fn(usize) -> f64; 4] = [
+            |i| ((i * 7) % 5) as f64,                                      // ties in several lanes
+            |i| if i % 3 == 0 { f64::NAN } else { 10.0 - (i % 4) as f64 }, // NaN among values
+            |_| f64::INFINITY,
+            |i| if i == 13 || i == 21 { -1.0 } else { f64::NAN }, // tie across lanes
+        ];
+        for n in (0..=17).chain([64, 203]) {
+            for f in patterns {
+                let v: Vec<f64> = (0..n).map(f).collect();
+                let got = lane_argmin(n, |i| v[i]);
+                let want = plain(&v);
+                assert_eq!((got.0.to_bits(), got.1), (want.0.to_bits(), want.1), "n {n}: {v:?}");
             }
         }
     }
