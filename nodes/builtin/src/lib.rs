@@ -16,6 +16,7 @@ pub mod field_noise;
 pub mod flow_topics;
 pub mod gain;
 pub mod live_view;
+pub mod packet_node;
 pub mod platelets;
 pub mod recorder;
 pub mod regulariser;

@@ -16,7 +16,7 @@ use sonoflow_messages::{
 use sonoflow_node_kit::PortDir::*;
 use sonoflow_node_kit::{parse_params, port, KindSpec, Kit};
 
-use crate::doppler::{run_packet_node, wire_clutter_kind, PacketEstimator, PacketMessages};
+use crate::packet_node::{run_packet_node, wire_clutter_kind, Message, PacketEstimator, PacketMessages};
 
 /// The `speckle-tracking` node kind.
 pub const SPEC: KindSpec = KindSpec::new(
@@ -34,9 +34,6 @@ pub const SPEC: KindSpec = KindSpec::new(
 pub fn validate(v: &serde_json::Value) -> Result<(), String> {
     parse_params::<SpeckleParams>(v)?.validate().map_err(|e| e.to_string())
 }
-
-/// A header and its payload planes.
-type Message<H> = (H, Vec<f32>);
 
 /// The messages of one packet: the axial map, then the vector field.
 pub fn packet_messages(

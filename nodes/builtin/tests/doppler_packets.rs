@@ -2,7 +2,8 @@
 //! vector messages.
 #![allow(clippy::unwrap_used)]
 
-use sonoflow_builtin::doppler::{look_header, packet_messages, to_c32};
+use sonoflow_builtin::doppler::packet_messages;
+use sonoflow_builtin::packet_node::{look_header, to_c32};
 use sonoflow_doppler::{PacketAssembler, PacketParams};
 use sonoflow_messages::{plane, Complex32, GridV1, IqFrameHeaderV3};
 
