@@ -28,6 +28,31 @@ C = sf.node.CONSTANTS
 NO_ESTIMATE = 1
 
 
+_PROJECTIONS = {}
+
+
+def look_projection(h, projection, n):
+    """The look's projection (a_x, a_z) per pixel, float64: through its aperture (cached per look
+    geometry, as the built-in node does) or the nominal plane wave."""
+    convex = h["n_elements"] > 0 and np.isfinite(h["radius"]) and h["radius"] > 0
+    if projection == "nominal" and convex:
+        # as the built-in node: the angles of a convex array's looks are taken from each
+        # element's normal, which no plane-wave projection describes
+        raise RuntimeError("lag1_estimator: projection = \"nominal\" on a convex array: use \"aperture\"")
+    if projection == "aperture":
+        g = h["grid"]
+        key = tuple(float(h[k]) for k in ("tx_angle", "rx_angle", "fc", "c", "pitch", "n_elements", "fnumber",
+                                          "element_width", "radius", "apodization"))
+        key += tuple(float(g[k]) for k in ("x0", "z0", "dx", "dz", "nx", "nz"))
+        if key not in _PROJECTIONS:
+            _PROJECTIONS[key] = sf.look_projection(h)
+        a = _PROJECTIONS[key]
+        if a is not None:
+            return a[0].reshape(-1).astype(np.float64), a[1].reshape(-1).astype(np.float64)
+    return (np.full(n, -(np.sin(h["tx_angle"]) + np.sin(h["rx_angle"])) / 2),
+            np.full(n, -(np.cos(h["tx_angle"]) + np.cos(h["rx_angle"])) / 2))
+
+
 def estimate(node, looks, lag, projection):
     t0 = time.thread_time_ns()
     first = next(iter(looks.values()))["header"]
@@ -45,20 +70,15 @@ def estimate(node, looks, lag, projection):
         h = look["header"]
         packet = np.stack([f.reshape(nz, nx) for f in look["frames"]], axis=2)
         v, _var, p, flags = sf.doppler_maps(packet, {"fc": h["fc"], "c": h["c"], "PRF": h["prf"]}, 1, lag)
-        a = sf.look_projection(h) if projection == "aperture" else None
-        if a is None:
-            a0 = np.full(n, -(np.sin(h["tx_angle"]) + np.sin(h["rx_angle"])) / 2)
-            a1 = np.full(n, -(np.cos(h["tx_angle"]) + np.cos(h["rx_angle"])) / 2)
-        else:
-            a0, a1 = (a[i].reshape(-1).astype(np.float64) for i in (0, 1))
+        a0, a1 = look_projection(h, projection, n)
         ok = (flags.reshape(-1) & NO_ESTIMATE) == 0
         vd = v.reshape(-1).astype(np.float64)
-        a0, a1 = a0[ok], a1[ok]
-        ata[0, ok] += a0 * a0
-        ata[1, ok] += a0 * a1
-        ata[2, ok] += a1 * a1
-        atb[0, ok] += a0 * vd[ok]
-        atb[1, ok] += a1 * vd[ok]
+        b0, b1 = a0[ok], a1[ok]
+        ata[0, ok] += b0 * b0
+        ata[1, ok] += b0 * b1
+        ata[2, ok] += b1 * b1
+        atb[0, ok] += b0 * vd[ok]
+        atb[1, ok] += b1 * vd[ok]
         used += ok
         power += p.reshape(-1) / len(looks)
         frame_id = max(frame_id, h["common"]["frame_id"])
@@ -67,10 +87,12 @@ def estimate(node, looks, lag, projection):
                 "common": {"frame_id": h["common"]["frame_id"], "t_valid": h["common"]["t_valid"]},
                 "grid": g, "fc": h["fc"], "c": h["c"], "prf": h["prf"], "rx_angle": h["rx_angle"],
                 "tx_angle": h["tx_angle"], "nyquist_velocity": h["c"] * h["prf"] / (4 * h["fc"] * lag),
-                "packet": h["packet"], "packet_size": len(look["frames"]), "n_planes": 3, "estimator": 101,
-                "plane_ids": [C["PLANE_VELOCITY"], C["PLANE_POWER"], C["PLANE_FLAGS"]],
+                "packet": h["packet"], "packet_size": len(look["frames"]), "n_planes": 5, "estimator": 101,
+                "plane_ids": [C["PLANE_VELOCITY"], C["PLANE_POWER"], C["PLANE_FLAGS"], C["PLANE_PROJECTION_X"],
+                              C["PLANE_PROJECTION_Z"]],
             }
-            planes = np.stack([v.reshape(-1), p.reshape(-1), (~ok).astype(np.float32)])
+            planes = np.stack([v.reshape(-1), p.reshape(-1), (~ok).astype(np.float32), a0.astype(np.float32),
+                               a1.astype(np.float32)])
             node.publish("maps", mh, planes)
     a11, a12, a22 = ata
     det = a11 * a22 - a12 * a12
@@ -95,7 +117,7 @@ def main():
     with sf.Node() as node:
         lag = node.params.get("lag", 1)
         if not (isinstance(lag, int) and 1 <= lag <= 16):
-            raise SystemExit(f"lag_estimator: params.lag = {lag!r} is out of range: 1 ..= 16")
+            raise SystemExit(f"lag1_estimator: params.lag = {lag!r} is out of range: 1 ..= 16")
         projection = node.params.get("projection", "aperture")
         if projection not in ("aperture", "nominal"):
             raise SystemExit(f"lag1_estimator: params.projection = {projection!r}: \"aperture\" or \"nominal\"")

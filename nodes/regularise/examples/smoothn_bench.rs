@@ -6,7 +6,7 @@
 //!     [--in field.npy] [--out smoothed.npy] [--ny 200] [--nx 200] [--repeats 20] [--flavour matlab|pymust]
 //! ```
 //! `--in` reads a real `.npy` of shape (components, ny, nx) (as written by
-//! `bench/smoothn/side_by_side.py`; any real dtype, C or Fortran order, read by sonoflow-fileio);
+//! `bench/smoothn/side_by_side.py`; f4, f8, i4, i8 or u1, C or Fortran order, read by sonoflow-fileio);
 //! without it the field is generated from a fixed seed. Prints one JSON line with the timings (ms)
 //! and the result summary.
 use std::path::Path;

@@ -61,10 +61,22 @@ fn vx_by_id(s: &Solver) -> Vec<(u64, Real)> {
     v
 }
 
-/// The largest difference of two [`vx_by_id`] fields, particle by particle.
+/// The largest difference of two [`vx_by_id`] fields, particle by particle (the same ids in
+/// both; a NaN counts as an infinite difference).
 fn largest_difference(a: &[(u64, Real)], b: &[(u64, Real)]) -> Real {
     assert_eq!(a.len(), b.len(), "particle counts differ");
-    a.iter().zip(b).map(|(a, b)| (a.1 - b.1).abs()).fold(0.0, Real::max)
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| {
+            assert_eq!(a.0, b.0, "particle ids differ");
+            let d = (a.1 - b.1).abs();
+            if d.is_nan() {
+                Real::INFINITY
+            } else {
+                d
+            }
+        })
+        .fold(0.0, Real::max)
 }
 
 #[test]

@@ -48,34 +48,56 @@ def _fill(arr, value, path):
         target[...] = v
 
 
+def _header_number(header, path, integer=False):
+    """``header[a][b]…`` for the dotted ``path`` as a finite float (or a whole int), else an error
+    naming ``header.<path>``."""
+    v = header
+    for k in path.split("."):
+        if not isinstance(v, dict) or k not in v:
+            raise ValueError(f"header.{path}: missing (an IqFrameV3 header is needed)")
+        v = v[k]
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise TypeError(f"header.{path}: expected a number, got {type(v).__name__}")
+    if integer:
+        if not float(v).is_integer() or v < 0:
+            raise ValueError(f"header.{path} = {v!r}: expected a whole number >= 0")
+        return int(v)
+    return float(v)
+
+
 def look_projection(header):
     """The per-pixel Doppler projection vectors of the look an I/Q frame header describes: float32
     (2, nz, nx), ``a_x`` then ``a_z``, the velocity the look measures being ``a · (vx, vz)``,
     through the receive aperture the header carries (pitch, elements, f-number, element width,
     convex radius, apodisation) — what the built-in ``doppler`` node uses with its default
     ``projection = "aperture"``. ``None`` when the header carries no aperture (``n_elements`` 0):
-    then the nominal plane-wave projection ``-(sin θt + sin θr, cos θt + cos θr)/2`` applies."""
+    then the nominal plane-wave projection ``-(sin θt + sin θr, cos θt + cos θr)/2`` applies.
+    A missing, non-numeric or out-of-range field raises ``ValueError``/``TypeError`` naming it."""
     if not isinstance(header, dict):
         raise TypeError(f"header: expected the dict of an IqFrameV3 message, got {type(header).__name__}")
-    missing = [k for k in ("n_elements", "pitch", "fnumber", "element_width", "radius", "apodization", "fc", "c",
-                           "tx_angle", "rx_angle", "grid") if k not in header]
-    if missing:
-        raise ValueError(f"header: missing field(s) {', '.join(missing)} (an IqFrameV3 header is needed)")
-    if int(header["n_elements"]) == 0:
+    n_elements = _header_number(header, "n_elements", integer=True)
+    if n_elements == 0:
         return None
-    width, radius = float(header["element_width"]), float(header["radius"])
+    apod = _header_number(header, "apodization", integer=True)
+    if apod not in (0, CONSTANTS["APODIZATION_HANN"]):
+        raise ValueError(f"header.apodization = {apod}: 0 (boxcar) or {CONSTANTS['APODIZATION_HANN']} (Hann)")
+    values = {k: _header_number(header, k) for k in ("pitch", "fnumber", "element_width", "radius", "fc", "c", "tx_angle", "rx_angle")}
+    grid = {k: _header_number(header, f"grid.{k}") for k in ("x0", "z0", "dx", "dz")}
+    grid.update({k: _header_number(header, f"grid.{k}", integer=True) for k in ("nx", "nz")})
+    for k, v in list(values.items()) + [(f"grid.{k}", v) for k, v in grid.items()]:
+        if k != "radius" and not np.isfinite(v):
+            raise ValueError(f"header.{k} = {v}: must be finite")
+    width, radius = values["element_width"], values["radius"]
     aperture = {
-        "pitch": float(header["pitch"]),
-        "n_elements": int(header["n_elements"]),
-        "fnumber": float(header["fnumber"]),
+        "pitch": values["pitch"],
+        "n_elements": n_elements,
+        "fnumber": values["fnumber"],
         "width": width if width > 0 else None,
         "radius": radius if np.isfinite(radius) and radius > 0 else None,
-        "apodization": "hann" if int(header["apodization"]) == CONSTANTS["APODIZATION_HANN"] else "boxcar",
+        "apodization": "hann" if apod == CONSTANTS["APODIZATION_HANN"] else "boxcar",
     }
-    grid = {k: header["grid"][k] for k in ("x0", "z0", "dx", "dz", "nx", "nz")}
-    grid = {k: (int(v) if k in ("nx", "nz") else float(v)) for k, v in grid.items()}
-    return _native.aperture_projection(json.dumps(aperture), float(header["fc"]), float(header["c"]),
-                                       float(header["tx_angle"]), float(header["rx_angle"]), json.dumps(grid))
+    return _native.aperture_projection(json.dumps(aperture), values["fc"], values["c"], values["tx_angle"],
+                                       values["rx_angle"], json.dumps(grid))
 
 
 class Node:
