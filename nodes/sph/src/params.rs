@@ -126,7 +126,8 @@ pub struct SphParams {
     /// δ of the δ-SPH density diffusion term (Molteni & Colagrossi 2009) added to eq 7,
     /// δ h c Σ 2(ρ_b − ρ_a) (r_ba·∇_a W_ab)/r² V_b over fluid and reservoir neighbours, in \[0, 1\].
     /// Default 0.1 (the usual value; damps the density noise). The paper has none: 0 in
-    /// [`SphParams::paper_scheme`].
+    /// [`SphParams::paper_scheme`]. Under a body force the density difference is taken relative to
+    /// hydrostatic balance ([`crate::wcsph::hydrostatic_density_gradient`]).
     pub density_diffusion: Real,
     /// Coefficient A of particle shifting (Lind et al. 2012, with the diffusion coefficient of Xu et al. 2009 /
     /// Skillen et al. 2013 written D = A h |u|max Δt, |u|max the largest speed in the domain): after every step a fluid particle moves by δr = −D ∇C (capped at 0.1 h), and

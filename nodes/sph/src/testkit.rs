@@ -206,6 +206,9 @@ pub struct Hydrostatic {
     /// Mean gauge pressure of the deepest fluid row, and ρ₀ g z there \[Pa\].
     pub p_bottom: Real,
     pub p_expected: Real,
+    /// The same for the shallowest fluid row (one spacing below the lid).
+    pub p_top: Real,
+    pub p_top_expected: Real,
     /// Fluid particles outside the box at the end.
     pub outside: usize,
     /// Times the anti-penetration guard fired.
@@ -220,8 +223,21 @@ pub fn hydrostatic_tank(units: Real) -> Result<Hydrostatic, SphError> {
     hydrostatic_tank_with(units, Scheme::Paper)
 }
 
+impl Hydrostatic {
+    /// The pressure difference between the deepest and the shallowest fluid row over its
+    /// hydrostatic value ρ₀ g Δz: 1 when the pressure balances gravity, whatever the level.
+    pub fn gradient_ratio(&self) -> Real {
+        (self.p_bottom - self.p_top) / (self.p_expected - self.p_top_expected)
+    }
+}
+
 /// [`hydrostatic_tank`] with `scheme`.
 pub fn hydrostatic_tank_with(units: Real, scheme: Scheme) -> Result<Hydrostatic, SphError> {
+    hydrostatic_tank_tuned(units, |p| scheme.apply(p))
+}
+
+/// [`hydrostatic_tank`] with the parameters (the paper's scheme's) changed by `tune`.
+pub fn hydrostatic_tank_tuned(units: Real, tune: impl FnOnce(SphParams) -> SphParams) -> Result<Hydrostatic, SphError> {
     let (hgt, n, g) = (2e-3, 20i64, 9.81);
     let dx = hgt / n as Real;
     let c = 10.0 * (g * hgt).sqrt();
@@ -246,8 +262,15 @@ pub fn hydrostatic_tank_with(units: Real, scheme: Scheme) -> Result<Hydrostatic,
             id += 1;
         }
     }
-    let params =
-        SphParams { h: 1.2 * dx, rho0: RHO0, c, mu: 1e-3, body_force: [0.0, g], dt_max: 1.0, ..scheme.params() };
+    let params = tune(SphParams {
+        h: 1.2 * dx,
+        rho0: RHO0,
+        c,
+        mu: 1e-3,
+        body_force: [0.0, g],
+        dt_max: 1.0,
+        ..Scheme::Paper.params()
+    });
     let mut s = Solver::new(params, p, 0.0)?.with_domain(Arc::new(BoxDomain { min: [0.0, 0.0], max: [hgt, hgt] }));
     let t_end = units * (hgt / g).sqrt();
     let (mut vmax, mut ke_peak): (Real, Real) = (0.0, 0.0);
@@ -261,11 +284,16 @@ pub fn hydrostatic_tank_with(units: Real, scheme: Scheme) -> Result<Hydrostatic,
     let pt = &s.particles;
     let zb = (n - 1) as Real * dx;
     let (mut sum, mut cnt, mut outside) = (0.0, 0usize, 0usize);
+    let (mut sum_top, mut cnt_top) = (0.0, 0usize);
     for i in 0..pt.len() {
         if pt.kind[i] == ParticleKind::Fluid {
             if (pt.z[i] - zb).abs() < 0.5 * dx {
                 sum += c * c * (pt.rho[i] - RHO0);
                 cnt += 1;
+            }
+            if (pt.z[i] - dx).abs() < 0.5 * dx {
+                sum_top += c * c * (pt.rho[i] - RHO0);
+                cnt_top += 1;
             }
             if !(pt.x[i] > 0.0 && pt.x[i] < hgt && pt.z[i] > 0.0 && pt.z[i] < hgt) {
                 outside += 1;
@@ -280,6 +308,8 @@ pub fn hydrostatic_tank_with(units: Real, scheme: Scheme) -> Result<Hydrostatic,
         final_ke: d.kinetic_energy,
         p_bottom: sum / cnt as Real,
         p_expected: RHO0 * g * zb,
+        p_top: sum_top / cnt_top as Real,
+        p_top_expected: RHO0 * g * dx,
         outside,
         guard_corrections: d.guard_corrections,
     })

@@ -80,6 +80,21 @@ pub fn pressure(params: &SphParams, rho: Real) -> Real {
     params.c * params.c * (rho - params.rho0) + params.background_pressure
 }
 
+/// The density gradient `ρ₀ g / c²` of hydrostatic balance under the body force `g` (linear
+/// equation of state: `∇p = c² ∇ρ = ρ g`, ρ ≈ ρ₀), zero along a periodic axis (no pressure
+/// gradient balances a force there) and without density diffusion. δ-SPH diffuses the density
+/// relative to it (Fourtakas et al. 2019, "dynamic density"): `ρ_b − ρ_a − k·(r_b − r_a)`, so
+/// that a fluid at rest under gravity keeps its hydrostatic density profile; Molteni &
+/// Colagrossi's plain `ρ_b − ρ_a` diffuses that profile away and lets the column sink onto the
+/// bottom wall (pressure gradient 74 % of ρ₀ g in the tank of `testkit::hydrostatic_tank`).
+pub fn hydrostatic_density_gradient(params: &SphParams, g: [Real; 2]) -> [Real; 2] {
+    if params.density_diffusion <= 0.0 {
+        return [0.0, 0.0];
+    }
+    let k = params.rho0 / (params.c * params.c);
+    [if params.periodic_x.is_some() { 0.0 } else { k * g[0] }, if params.periodic_z.is_some() { 0.0 } else { k * g[1] }]
+}
+
 #[inline]
 fn map_indices<T, F>(parallel: bool, n: usize, out: &mut Vec<T>, f: F)
 where
@@ -170,6 +185,8 @@ pub fn compute_rates(
     let w0 = kernel.w(0.0);
     let delta_hc2 = 2.0 * params.density_diffusion * kernel.h * params.c;
     let diffusion = params.density_diffusion > 0.0;
+    let hk = hydrostatic_density_gradient(params, g);
+    let hydro = hk != [0.0, 0.0];
     let shifting = params.shifting > 0.0;
     let eps_t = params.tensile_correction;
     let tensile = eps_t > 0.0;
@@ -201,8 +218,10 @@ pub fn compute_rates(
             let rb = rho[b];
             drho += m[b] * (dux * gx + duz * gz);
             if diffusion && !kind[b].is_wall() {
-                // δ-SPH (Molteni & Colagrossi 2009): δ h c Σ 2(ρ_b − ρ_a) (r_ba·∇_a W)/r² V_b
-                drho -= delta_hc2 * (rb - ra) * (dx * gx + dz * gz) / (r2 + eta2) * m[b] / rb;
+                // δ-SPH (Molteni & Colagrossi 2009): δ h c Σ 2(ρ_b − ρ_a) (r_ba·∇_a W)/r² V_b, the
+                // density difference relative to hydrostatic balance ((dx, dz) = r_a − r_b)
+                let d = if hydro { (rb - ra) + (hk[0] * dx + hk[1] * dz) } else { rb - ra };
+                drho -= delta_hc2 * d * (dx * gx + dz * gz) / (r2 + eta2) * m[b] / rb;
             }
             if shifting {
                 let vb = m[b] / rb;

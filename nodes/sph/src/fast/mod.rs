@@ -217,7 +217,7 @@ pub fn compute_rates_with(
     }
     let simd = Simd::detect(backend);
     let t1 = std::time::Instant::now();
-    if fws.sort(params, kernel, particles) {
+    if fws.sort(params, kernel, particles, wcsph::hydrostatic_density_gradient(params, g)) {
         // coincident particles: the reference's 0/0 (NaN rates, reported by the solver)
         fws.cells.build(&particles.x, &particles.z, support, px, pz);
         wcsph::compute_rates(params, kernel, particles, &fws.cells, g, ws);
@@ -314,7 +314,9 @@ impl FastWorkspace {
     /// Sorted, padded copies of the particle data with the per-particle quantities of the pair
     /// terms (block by block, on threads when `params.parallel`). Returns true when two particles
     /// share a position (they share a cell; the fast kernels would treat the pair as a self pair).
-    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles) -> bool {
+    /// Sorts the particles into the grid's order and fills the channels; `hk`: the hydrostatic
+    /// density gradient that the δ-SPH density (`DEV`) is taken relative to.
+    fn sort(&mut self, params: &SphParams, kernel: &Kernel, p: &Particles, hk: [Real; 2]) -> bool {
         let n = p.len();
         let inv_h = 1.0 / kernel.h;
         self.make_blocks();
@@ -343,6 +345,7 @@ impl FastWorkspace {
             let c = ch.each_mut().map(|v| take(v, len));
             outs.push((f, take(&mut kind, len), take(&mut wall, len), c));
         }
+        let hydro = hk != [0.0, 0.0];
         let coincident = std::sync::atomic::AtomicBool::new(false);
         run_blocks(params.parallel, &self.blocks, outs, |c0, c1, (f, kind, wall, ch)| {
             let [xoh, rho, mass] = f;
@@ -374,7 +377,9 @@ impl FastWorkspace {
                     mp[j] = (mk * prk) as f32;
                     m[j] = mk as f32;
                     v[j] = (mk * inv_r) as f32;
-                    dev[j] = (r - params.rho0) as f32;
+                    // δ-SPH's density: relative to hydrostatic balance (wcsph::hydrostatic_density_gradient)
+                    dev[j] = if hydro { r - params.rho0 - (hk[0] * p.x[i] + hk[1] * p.z[i]) } else { r - params.rho0 }
+                        as f32;
                     vd[j] = if w { 0.0 } else { v[j] };
                     pc[j] = pk as f32;
                     rc[j] = r as f32;
