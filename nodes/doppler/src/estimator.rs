@@ -532,6 +532,78 @@ unsafe fn lag_sums_avx512(s: &[C32], lag: usize) -> (f64, C64) {
     acc.finish()
 }
 
+/// [`lag_sums`] with AVX2 vectors: the 8 lanes as two halves of four f64, the same products and
+/// additions (multiply, then add: no FMA), so the same bits. Full four-sample groups are plain
+/// loads; a tail is a masked load (zeros after it, as `lag_sums`' padding; masked loads are slow
+/// on some CPUs, so only there). The lag products' full groups also feed R0 (one load of x for
+/// both); every lane still sums its frames in ascending order.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn lag_sums_avx2(s: &[C32], lag: usize) -> (f64, C64) {
+    use std::arch::x86_64::{
+        __m256d, _mm256_add_pd, _mm256_castps256_ps128, _mm256_cmpgt_epi32, _mm256_cvtps_pd, _mm256_extractf128_ps,
+        _mm256_loadu_ps, _mm256_maskload_ps, _mm256_mul_pd, _mm256_permute_pd, _mm256_set1_epi32, _mm256_setr_epi32,
+        _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    // SAFETY: `Complex<f32>` is `#[repr(C)] { re, im }`, so n samples are 2n contiguous f32.
+    let f: &[f32] = unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<f32>(), 2 * s.len()) };
+    let n = s.len();
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    // The `k` f32 from `at` (k ≤ 8) widened to f64 in two halves, zeros after them.
+    let widen = |at: usize, k: usize| -> [__m256d; 2] {
+        debug_assert!(k <= 8 && at + k <= f.len());
+        // SAFETY: a full load reads f[at..at + 8]; otherwise the mask limits it to f[at..at + k].
+        let v = unsafe {
+            if k == 8 {
+                _mm256_loadu_ps(f.as_ptr().add(at))
+            } else {
+                _mm256_maskload_ps(f.as_ptr().add(at), _mm256_cmpgt_epi32(_mm256_set1_epi32(k as i32), lane))
+            }
+        };
+        [_mm256_cvtps_pd(_mm256_castps256_ps128(v)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v))]
+    };
+    let z = _mm256_setzero_pd();
+    let (mut p0, mut p1, mut q1) = ([z; 2], [z; 2], [z; 2]);
+    let m = n - lag;
+    // The full groups of the lag products also feed R0 (x is the same sample group), then the
+    // rest of R0 and the lag products' tail: every lane still sums in ascending frame order.
+    let mfull = m - m % 4;
+    for k0 in (0..mfull).step_by(4) {
+        let (x, y) = (widen(2 * k0, 8), widen(2 * (k0 + lag), 8));
+        for h in 0..2 {
+            p0[h] = _mm256_add_pd(p0[h], _mm256_mul_pd(x[h], x[h]));
+            p1[h] = _mm256_add_pd(p1[h], _mm256_mul_pd(x[h], y[h]));
+            q1[h] = _mm256_add_pd(q1[h], _mm256_mul_pd(x[h], _mm256_permute_pd::<0b0101>(y[h])));
+        }
+    }
+    for k0 in (mfull..n).step_by(4) {
+        let v = widen(2 * k0, 2 * (n - k0).min(4));
+        for h in 0..2 {
+            p0[h] = _mm256_add_pd(p0[h], _mm256_mul_pd(v[h], v[h]));
+        }
+    }
+    if mfull < m {
+        let k = 2 * (m - mfull);
+        let (x, y) = (widen(2 * mfull, k), widen(2 * (mfull + lag), k));
+        for h in 0..2 {
+            p1[h] = _mm256_add_pd(p1[h], _mm256_mul_pd(x[h], y[h]));
+            q1[h] = _mm256_add_pd(q1[h], _mm256_mul_pd(x[h], _mm256_permute_pd::<0b0101>(y[h])));
+        }
+    }
+    let mut acc = LagAcc::default();
+    // SAFETY: each destination holds 8 f64, written as two halves of 4.
+    unsafe {
+        for (dst, v) in [(&mut acc.p0, p0), (&mut acc.p1, p1), (&mut acc.q1, q1)] {
+            _mm256_storeu_pd(dst.as_mut_ptr(), v[0]);
+            _mm256_storeu_pd(dst.as_mut_ptr().add(4), v[1]);
+        }
+    }
+    acc.finish()
+}
+
 /// [`lag_sums`] of each pixel of a pixel-major row (`n_frames` contiguous frames per pixel),
 /// with the widest vector instructions the CPU has (the same operations, so the same bits).
 fn lag_sums_row(data: &[C32], n_frames: usize, lag: usize, r0: &mut [f64], r1: &mut [C64]) {
@@ -552,7 +624,10 @@ fn lag_sums_row(data: &[C32], n_frames: usize, lag: usize, r0: &mut [f64], r1: &
         }
         #[target_feature(enable = "avx2")]
         unsafe fn avx2(data: &[C32], n_frames: usize, lag: usize, r0: &mut [f64], r1: &mut [C64]) {
-            row(data, n_frames, lag, r0, r1)
+            for ((s, a), b) in data.chunks_exact(n_frames).zip(r0).zip(r1) {
+                // SAFETY: the CPU has AVX2 (this function's target feature).
+                (*a, *b) = unsafe { lag_sums_avx2(s, lag) };
+            }
         }
         if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl") {
             // SAFETY: the CPU has AVX-512F and VL (checked above).
@@ -577,19 +652,19 @@ where
     if wx.len() > 1 {
         let (lo, hi) = (wx.len() - 1 - sx, nx.saturating_sub(sx)); // i in [lo, hi): no mirroring
         tmp.par_chunks_mut(nx).zip(data.par_chunks(nx)).for_each(|(t, d)| {
-            for (i, o) in t.iter_mut().enumerate() {
-                let mut acc = T::default();
-                if i >= lo && i < hi {
-                    let top = i + sx;
-                    for (k, w) in wx.iter().enumerate() {
-                        acc = acc + d[top - k] * *w;
-                    }
-                } else {
-                    for (k, w) in wx.iter().enumerate() {
-                        acc = acc + d[mirror(i as isize + sx as isize - k as isize, nx)] * *w;
+            // Tap by tap over the whole row (a loop that vectorises); each output still sums
+            // its taps from zero in ascending k, the same order as a per-sample loop.
+            t.fill(T::default());
+            for (k, w) in wx.iter().enumerate() {
+                if lo < hi {
+                    let shift = lo + sx - k; // d index of output lo for tap k
+                    for (o, x) in t[lo..hi].iter_mut().zip(&d[shift..shift + (hi - lo)]) {
+                        *o = *o + *x * *w;
                     }
                 }
-                *o = acc;
+                for i in (0..lo.min(nx)).chain(hi.max(lo)..nx) {
+                    t[i] = t[i] + d[mirror(i as isize + sx as isize - k as isize, nx)] * *w;
+                }
             }
         });
         std::mem::swap(data, tmp);
@@ -819,7 +894,7 @@ mod tests {
 
     /// Every way of summing a pixel's frames gives the same bits: frame by frame into
     /// [`LagAcc`] (the frame-major path), the portable four-frame groups and, where the CPU has
-    /// it, the AVX-512 kernel; lengths with and without a tail, several lags.
+    /// it, the AVX-512 and AVX2 kernels; lengths with and without a tail, several lags.
     #[test]
     fn lag_sum_kernels_agree_bit_for_bit() {
         for (n, lag) in [(2usize, 1usize), (5, 1), (8, 1), (13, 2), (32, 1), (33, 4), (7, 6)] {
@@ -839,6 +914,11 @@ mod tests {
             if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl") {
                 // SAFETY: the CPU has AVX-512F and VL (checked above).
                 assert_eq!(bits(unsafe { lag_sums_avx512(&s, lag) }), bits(want), "AVX-512, n {n} lag {lag}");
+            }
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked above).
+                assert_eq!(bits(unsafe { lag_sums_avx2(&s, lag) }), bits(want), "AVX2, n {n} lag {lag}");
             }
             let r0: f64 = s.iter().map(|x| f64::from(x.norm_sqr())).sum();
             assert!((want.0 - r0).abs() < 1e-5 * r0, "R0 against a plain sum");
