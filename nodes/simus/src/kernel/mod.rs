@@ -243,7 +243,7 @@ struct Phasors<'a> {
 /// recursion chains to overlap.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn chunks<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8, const CW: usize>(
+fn chunks<S: simd::Ops, const N: usize, const M: usize, const FFD: bool, const TX: u8, const CW: usize>(
     ph: Phasors<'_>,
     tab: &Tables,
     mm: usize,
@@ -384,7 +384,23 @@ fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8,
         let dir = if FFD { &sc.dir[gi * per_s..(gi + 1) * per_s] } else { &sc.dir[..0] };
         let mut tr = [S::zero(); N];
         let mut ti = [S::zero(); N];
-        let mut c = 0;
+        if S::SPLIT {
+            // Each half of every chunk in turn (CW = 1 for these builds): per lane the same
+            // operations in the same chunk order as the whole vectors.
+            let (mut trl, mut til) = ([<S::Lo as simd::Ops>::zero(); N], [<S::Lo as simd::Ops>::zero(); N]);
+            let (mut trh, mut tih) = ([<S::Hi as simd::Ops>::zero(); N], [<S::Hi as simd::Ops>::zero(); N]);
+            for c in 0..nc {
+                let ph = Phasors { p_re: &mut *p_re, p_im: &mut *p_im, e_re, e_im, dir };
+                chunks::<S::Lo, N, M, FFD, TX, 1>(ph, tab, mm, nc, c, k, gi, r_re_all, r_im_all, &mut trl, &mut til);
+                let ph = Phasors { p_re: &mut *p_re, p_im: &mut *p_im, e_re, e_im, dir };
+                chunks::<S::Hi, N, M, FFD, TX, 1>(ph, tab, mm, nc, c, k, gi, r_re_all, r_im_all, &mut trh, &mut tih);
+            }
+            for b in 0..N {
+                tr[b] = S::join(trl[b], trh[b]);
+                ti[b] = S::join(til[b], tih[b]);
+            }
+        }
+        let mut c = if S::SPLIT { nc } else { 0 };
         while c + CW <= nc {
             let ph = Phasors { p_re: &mut *p_re, p_im: &mut *p_im, e_re, e_im, dir };
             chunks::<S, N, M, FFD, TX, CW>(ph, tab, mm, nc, c, k, gi, r_re_all, r_im_all, &mut tr, &mut ti);
@@ -407,13 +423,29 @@ fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8,
         }
     }
     // receive: U_e += T_s R_se for the G scatterers, one row load/store per bin and chunk
+    let (s_re, s_im) = (&mut sc.s_re[kl * nc..(kl + N) * nc], &mut sc.s_im[kl * nc..(kl + N) * nc]);
+    // (Whole vectors also where pass 1 is split: splitting this pass was slower on a Zen 2, as
+    // the rows of R and U would be read twice.)
+    receive::<S, N>(&t, nc, r_re_all, r_im_all, s_re, s_im);
+}
+
+/// Pass 2 of [`step`]: `U_e += T_s R_se` over the G scatterers of the group (`t`: their transmit
+/// sums per bin) for the `N` bins' rows of `s_re`/`s_im`, one row load/store per bin and chunk.
+#[inline(always)]
+fn receive<S: simd::Ops, const N: usize>(
+    t: &[[(f32, f32); N]; G],
+    nc: usize,
+    r_re_all: &[V],
+    r_im_all: &[V],
+    s_re: &mut [V],
+    s_im: &mut [V],
+) {
     let mut tv = [[(S::zero(), S::zero()); G]; N];
     for b in 0..N {
         for gi in 0..G {
             tv[b][gi] = (S::splat(t[gi][b].0), S::splat(t[gi][b].1));
         }
     }
-    let (s_re, s_im) = (&mut sc.s_re[kl * nc..(kl + N) * nc], &mut sc.s_im[kl * nc..(kl + N) * nc]);
     for c in 0..nc {
         let rows = c * N * G..(c + 1) * N * G;
         let (rr_c, ri_c) = (&r_re_all[rows.clone()], &r_im_all[rows]);

@@ -11,12 +11,69 @@ use crate::kernel::{accumulate, Scratch, Tables, L, V};
 use crate::params::KernelChoice;
 use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
 
+/// The lane-wise operations of the phasor and receive passes, which also run on half vectors.
+pub(crate) trait Ops: Copy {
+    fn zero() -> Self;
+    fn splat(x: f32) -> Self;
+    fn load(v: &V) -> Self;
+    fn store(self, v: &mut V);
+    fn add(self, b: Self) -> Self;
+    fn mul(self, b: Self) -> Self;
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    fn neg_mul_add(self, b: Self, c: Self) -> Self;
+}
+
+impl<T: Lanes> Ops for T {
+    #[inline(always)]
+    fn zero() -> Self {
+        Lanes::zero()
+    }
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        Lanes::splat(x)
+    }
+    #[inline(always)]
+    fn load(v: &V) -> Self {
+        Lanes::load(v)
+    }
+    #[inline(always)]
+    fn store(self, v: &mut V) {
+        Lanes::store(self, v)
+    }
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        Lanes::add(self, b)
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        Lanes::mul(self, b)
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        Lanes::mul_add(self, b, c)
+    }
+    #[inline(always)]
+    fn neg_mul_add(self, b: Self, c: Self) -> Self {
+        Lanes::neg_mul_add(self, b, c)
+    }
+}
+
 /// The vector operations the kernel needs. `mul_add(a, b, c) = a·b + c`,
 /// `neg_mul_add(a, b, c) = c − a·b` (fused where the build has FMA).
 pub(crate) trait Lanes: Copy {
     /// 32 architectural vector registers of this width (AVX-512): the kernel may keep more
     /// state in registers.
     const WIDE: bool = false;
+    /// One vector is two registers and the build has 16 of them (AVX2): pass 1 runs on each
+    /// half in turn ([`Lanes::Lo`], [`Lanes::Hi`]), so that a chunk's phasor state stays in
+    /// registers. The same lane operations in the same order, so the same bits.
+    const SPLIT: bool = false;
+    /// Lanes 0–7 (used only where [`Lanes::SPLIT`]).
+    type Lo: Ops;
+    /// Lanes 8–15 (used only where [`Lanes::SPLIT`]).
+    type Hi: Ops;
+    /// The vector of two halves (only where [`Lanes::SPLIT`]).
+    fn join(lo: Self::Lo, hi: Self::Hi) -> Self;
     fn zero() -> Self;
     fn splat(x: f32) -> Self;
     fn load(v: &V) -> Self;
@@ -67,6 +124,12 @@ impl Portable {
 }
 
 impl Lanes for Portable {
+    type Lo = Self;
+    type Hi = Self;
+    #[inline(always)]
+    fn join(lo: Self, _: Self) -> Self {
+        lo
+    }
     #[inline(always)]
     fn zero() -> Self {
         Portable([0.0; L])
@@ -166,6 +229,12 @@ mod x86 {
     // into functions compiled with those features; `V` is 64-byte aligned with 16 f32.
     impl Lanes for Avx512 {
         const WIDE: bool = true;
+        type Lo = Self;
+        type Hi = Self;
+        #[inline(always)]
+        fn join(lo: Self, _: Self) -> Self {
+            lo
+        }
         #[inline(always)]
         fn zero() -> Self {
             Avx512(unsafe { _mm512_setzero_ps() })
@@ -291,8 +360,56 @@ mod x86 {
     #[derive(Clone, Copy)]
     pub(crate) struct Avx2(__m256, __m256);
 
+    /// Half `H` (lanes 8H … 8H + 7) of an [`Avx2`] vector: loads and stores that half of a `V`.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx2Half<const H: usize>(__m256);
+
+    // SAFETY: as for `Avx2` (reached only from the AVX2 + FMA build); `V` is 64-byte aligned,
+    // so each half is 32-byte aligned.
+    impl<const H: usize> Ops for Avx2Half<H> {
+        #[inline(always)]
+        fn zero() -> Self {
+            Avx2Half(unsafe { _mm256_setzero_ps() })
+        }
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx2Half(unsafe { _mm256_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn load(v: &V) -> Self {
+            Avx2Half(unsafe { _mm256_load_ps(v.0.as_ptr().add(8 * H)) })
+        }
+        #[inline(always)]
+        fn store(self, v: &mut V) {
+            unsafe { _mm256_store_ps(v.0.as_mut_ptr().add(8 * H), self.0) }
+        }
+        #[inline(always)]
+        fn add(self, b: Self) -> Self {
+            Avx2Half(unsafe { _mm256_add_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn mul(self, b: Self) -> Self {
+            Avx2Half(unsafe { _mm256_mul_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx2Half(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
+        }
+        #[inline(always)]
+        fn neg_mul_add(self, b: Self, c: Self) -> Self {
+            Avx2Half(unsafe { _mm256_fnmadd_ps(self.0, b.0, c.0) })
+        }
+    }
+
     // SAFETY: as for `Avx512`, with AVX2 and FMA detected.
     impl Lanes for Avx2 {
+        const SPLIT: bool = true;
+        type Lo = Avx2Half<0>;
+        type Hi = Avx2Half<1>;
+        #[inline(always)]
+        fn join(lo: Avx2Half<0>, hi: Avx2Half<1>) -> Self {
+            Avx2(lo.0, hi.0)
+        }
         #[inline(always)]
         fn zero() -> Self {
             unsafe { Avx2(_mm256_setzero_ps(), _mm256_setzero_ps()) }
@@ -499,16 +616,16 @@ mod tests {
         }
         #[cfg(target_arch = "x86_64")]
         if Simd::detect(KernelChoice::Auto) == Simd::Avx512 {
-            let got = x86::Avx512::hsum8(v.map(|r| x86::Avx512::load(&V(r))), 0.5);
+            let got = x86::Avx512::hsum8(v.map(|r| <x86::Avx512 as Lanes>::load(&V(r))), 0.5);
             for i in 0..8 {
                 assert!((got[i] - want[i]).abs() < 1e-5, "avx512 {i}: {} vs {}", got[i], want[i]);
-                let one = x86::Avx512::load(&V(v[i])).hsum() * 0.5;
+                let one = <x86::Avx512 as Lanes>::load(&V(v[i])).hsum() * 0.5;
                 assert!((one - want[i]).abs() < 1e-5, "avx512 hsum {i}");
             }
         }
         #[cfg(target_arch = "x86_64")]
         if Simd::detect(KernelChoice::Avx2) == Simd::Avx2 {
-            let got = x86::Avx2::hsum8(v.map(|r| x86::Avx2::load(&V(r))), 0.5);
+            let got = x86::Avx2::hsum8(v.map(|r| <x86::Avx2 as Lanes>::load(&V(r))), 0.5);
             for i in 0..8 {
                 assert!((got[i] - want[i]).abs() < 1e-5, "avx2 {i}");
             }
