@@ -9,29 +9,10 @@
 //! packet.npy (complex64 200×200×32), velocity.npy (float32 200×200) and rust.json (timings).
 #![allow(clippy::unwrap_used)]
 
-use std::io::Write;
 use std::time::Instant;
 
 use sonoflow_beamform::{DasParams, DasPlan, Grid, Interpolation, Rf2Iq, Rf2IqParams, RfView, TxWave, C32};
 use sonoflow_doppler::{DopplerEstimator, DopplerParams, Packet};
-
-fn npy(path: &std::path::Path, descr: &str, shape: &[usize], bytes: &[u8]) {
-    let shape_s = shape.iter().map(|s| format!("{s},")).collect::<String>();
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({shape_s}), }}");
-    while (header.len() + 11) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut f = std::fs::File::create(path).unwrap();
-    f.write_all(b"\x93NUMPY\x01\x00").unwrap();
-    f.write_all(&(header.len() as u16).to_le_bytes()).unwrap();
-    f.write_all(header.as_bytes()).unwrap();
-    f.write_all(bytes).unwrap();
-}
-
-fn c32_bytes(v: &[C32]) -> Vec<u8> {
-    v.iter().flat_map(|c| c.re.to_le_bytes().into_iter().chain(c.im.to_le_bytes())).collect()
-}
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -118,16 +99,12 @@ fn main() {
     println!("Doppler         {:8.3} ms/packet of {nf}", td * 1e3);
     if let Some(dir) = write {
         std::fs::create_dir_all(&dir).unwrap();
-        npy(&dir.join("rf.npy"), "<f4", &[ns, ne], &rf.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<_>>());
-        npy(&dir.join("das.npy"), "<c8", &[200, 200], &c32_bytes(&img));
+        use sonoflow_fileio::npy;
+        npy::write_f32(&dir.join("rf.npy"), &[ns, ne], false, &rf).unwrap();
+        npy::write_c64(&dir.join("das.npy"), &[200, 200], &img).unwrap();
         let pm: Vec<C32> = (0..grid.n_pixels()).flat_map(|p| packet.iter().map(move |f| f[p])).collect();
-        npy(&dir.join("packet.npy"), "<c8", &[200, 200, nf], &c32_bytes(&pm));
-        npy(
-            &dir.join("velocity.npy"),
-            "<f4",
-            &[200, 200],
-            &map.velocity.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<_>>(),
-        );
+        npy::write_c64(&dir.join("packet.npy"), &[200, 200, nf], &pm).unwrap();
+        npy::write_f32(&dir.join("velocity.npy"), &[200, 200], false, &map.velocity).unwrap();
         let json = format!(
             "{{\"threads\": {threads}, \"rf2iq_s\": {ti}, \"das_setup_s\": {ts}, \"das_apply_s\": {ta}, \"doppler_s\": {td}, \"taps\": {}, \"n_samples\": {ns}}}",
             plan.n_taps()

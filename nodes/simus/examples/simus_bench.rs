@@ -14,7 +14,6 @@
 //! PyMUST's (n_samples, n_elements) layout) and `rust.json` (timings, plan) for
 //! `bench/simus/side_by_side.py`.
 
-use std::io::Write;
 use std::time::Instant;
 
 use rand::{Rng, SeedableRng};
@@ -22,24 +21,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use sonoflow_simus::{Accuracy, KernelChoice, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
 
+/// Writes f32 data in C order through sonoflow-fileio (atomic, npyz).
 fn write_npy(path: &std::path::Path, shape: &[usize], data: &[f32]) -> std::io::Result<()> {
-    let shape_txt = match shape {
-        [n] => format!("({n},)"),
-        _ => format!("({})", shape.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")),
-    };
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_txt}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
-    f.write_all(b"\x93NUMPY\x01\x00")?;
-    f.write_all(&(header.len() as u16).to_le_bytes())?;
-    f.write_all(header.as_bytes())?;
-    for v in data {
-        f.write_all(&v.to_le_bytes())?;
-    }
-    f.flush()
+    sonoflow_fileio::npy::write_f32(path, shape, false, data).map_err(std::io::Error::other)
 }
 
 struct Args {
