@@ -502,6 +502,8 @@ unsafe fn lag_sums_avx512(s: &[C32], lag: usize) -> (f64, C64) {
     // SAFETY: `Complex<f32>` is `#[repr(C)] { re, im }`, so n samples are 2n contiguous f32.
     let f: &[f32] = unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<f32>(), 2 * s.len()) };
     let n = s.len();
+    // The raw loads below stay inside `f` only for lag ≤ n (the estimator checks frames > lag).
+    assert!(lag <= n, "lag_sums_avx512: lag {lag} > {n} frames");
     // The `k` f32 from `at` (k ≤ 8) widened to f64, zeros after them; a masked load reads
     // only those k (the zero padding of `lag_sums`, without a store and a reload).
     let widen = |at: usize, k: usize| -> __m512d {
@@ -551,6 +553,8 @@ unsafe fn lag_sums_avx2(s: &[C32], lag: usize) -> (f64, C64) {
     // SAFETY: `Complex<f32>` is `#[repr(C)] { re, im }`, so n samples are 2n contiguous f32.
     let f: &[f32] = unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<f32>(), 2 * s.len()) };
     let n = s.len();
+    // The raw loads below stay inside `f` only for lag ≤ n (the estimator checks frames > lag).
+    assert!(lag <= n, "lag_sums_avx2: lag {lag} > {n} frames");
     let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     // The `k` f32 from `at` (k ≤ 8) widened to f64 in two halves, zeros after them.
     let widen = |at: usize, k: usize| -> [__m256d; 2] {
@@ -897,7 +901,7 @@ mod tests {
     /// it, the AVX-512 and AVX2 kernels; lengths with and without a tail, several lags.
     #[test]
     fn lag_sum_kernels_agree_bit_for_bit() {
-        for (n, lag) in [(2usize, 1usize), (5, 1), (8, 1), (13, 2), (32, 1), (33, 4), (7, 6)] {
+        for (n, lag) in [(2usize, 1usize), (5, 1), (8, 1), (13, 2), (32, 1), (33, 4), (7, 6), (12, 4), (9, 8)] {
             let s: Vec<C32> =
                 (0..n).map(|k| C32::new((k as f32 * 0.7).sin() * 3.0, (k as f32 * 1.3).cos() - 0.2)).collect();
             let mut acc = LagAcc::default();
@@ -922,6 +926,49 @@ mod tests {
             }
             let r0: f64 = s.iter().map(|x| f64::from(x.norm_sqr())).sum();
             assert!((want.0 - r0).abs() < 1e-5 * r0, "R0 against a plain sum");
+        }
+    }
+
+    /// The separable window gives the same bits as a per-sample loop (each output sums its taps
+    /// from zero in ascending order, mirrored at the edges) for rows shorter than, as long as
+    /// and longer than the window, odd and even windows.
+    #[test]
+    fn smooth_matches_a_per_sample_loop_bit_for_bit() {
+        let per_sample = |d: &[f64], nx: usize, nz: usize, wz: &[f64], wx: &[f64]| {
+            let (sx, sz) = ((wx.len() - 1) / 2, (wz.len() - 1) / 2);
+            let mut t = vec![0.0; nx * nz];
+            for iz in 0..nz {
+                for i in 0..nx {
+                    let mut acc = 0.0;
+                    for (k, w) in wx.iter().enumerate() {
+                        acc += d[iz * nx + mirror(i as isize + sx as isize - k as isize, nx)] * w;
+                    }
+                    t[iz * nx + i] = acc;
+                }
+            }
+            let mut o = vec![0.0; nx * nz];
+            for iz in 0..nz {
+                for i in 0..nx {
+                    let mut acc = 0.0;
+                    for (k, w) in wz.iter().enumerate() {
+                        acc += t[mirror(iz as isize + sz as isize - k as isize, nz) * nx + i] * w;
+                    }
+                    o[iz * nx + i] = acc;
+                }
+            }
+            o
+        };
+        for nx in 1..=9 {
+            for (mx, mz) in [(2usize, 3usize), (3, 1), (4, 4), (5, 2), (7, 5), (12, 3)] {
+                let nz = 6;
+                let (wx, wz) = (window(WindowShape::Hamming, mx), window(WindowShape::Hamming, mz));
+                let d: Vec<f64> = (0..nx * nz).map(|i| ((i * 37 % 11) as f64 - 4.3) * 0.71).collect();
+                let (mut data, mut tmp) = (d.clone(), vec![0.0; nx * nz]);
+                smooth(&mut data, &mut tmp, nx, nz, &wz, &wx);
+                let want = per_sample(&d, nx, nz, &wz, &wx);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&data), bits(&want), "nx {nx}, window {mz} x {mx}");
+            }
         }
     }
 

@@ -13,8 +13,10 @@
 //! horizontal reduction per (scatterer, bin); the receive accumulation reads and writes one row
 //! `U[k][·]` per group of [`G`] scatterers. Each phasor is loaded once per `NB` = 2 bins, and
 //! with 32 vector registers two chunks are processed together (4 independent recursion chains
-//! for M = 2, as the complex multiply's 7-cycle latency needs ≥ 4 chains in flight). The
-//! generic code is instantiated for the vector types of [`simd`].
+//! for M = 2, as the complex multiply's 7-cycle latency needs ≥ 4 chains in flight). With 16
+//! registers (AVX2, a 16-lane vector in two of them) the phasor pass runs on each 8-lane half in
+//! turn, so that a chunk's state stays in registers ([`simd::Lanes::SPLIT`]). The generic code
+//! is instantiated for the vector types of [`simd`].
 
 // Lane loops index several arrays in lockstep: plain index loops keep them vectorisable.
 #![allow(clippy::needless_range_loop)]
@@ -385,8 +387,9 @@ fn step<S: Lanes, const N: usize, const M: usize, const FFD: bool, const TX: u8,
         let mut tr = [S::zero(); N];
         let mut ti = [S::zero(); N];
         if S::SPLIT {
-            // Each half of every chunk in turn (CW = 1 for these builds): per lane the same
-            // operations in the same chunk order as the whole vectors.
+            // Each half of every chunk in turn, one chunk per call: per lane the same operations
+            // in the same chunk order as the whole vectors (these builds are not WIDE, so the
+            // whole-vector path would also take one chunk per call).
             let (mut trl, mut til) = ([<S::Lo as simd::Ops>::zero(); N], [<S::Lo as simd::Ops>::zero(); N]);
             let (mut trh, mut tih) = ([<S::Hi as simd::Ops>::zero(); N], [<S::Hi as simd::Ops>::zero(); N]);
             for c in 0..nc {

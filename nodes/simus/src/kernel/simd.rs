@@ -68,11 +68,11 @@ pub(crate) trait Lanes: Copy {
     /// half in turn ([`Lanes::Lo`], [`Lanes::Hi`]), so that a chunk's phasor state stays in
     /// registers. The same lane operations in the same order, so the same bits.
     const SPLIT: bool = false;
-    /// Lanes 0–7 (used only where [`Lanes::SPLIT`]).
+    /// Where [`Lanes::SPLIT`]: lanes 0–7 (otherwise `Self`, unused).
     type Lo: Ops;
-    /// Lanes 8–15 (used only where [`Lanes::SPLIT`]).
+    /// Where [`Lanes::SPLIT`]: lanes 8–15 (otherwise `Self`, unused).
     type Hi: Ops;
-    /// The vector of two halves (only where [`Lanes::SPLIT`]).
+    /// The vector of two halves; called only where [`Lanes::SPLIT`].
     fn join(lo: Self::Lo, hi: Self::Hi) -> Self;
     fn zero() -> Self;
     fn splat(x: f32) -> Self;
@@ -127,8 +127,8 @@ impl Lanes for Portable {
     type Lo = Self;
     type Hi = Self;
     #[inline(always)]
-    fn join(lo: Self, _: Self) -> Self {
-        lo
+    fn join(_: Self, _: Self) -> Self {
+        unreachable!("Lanes::join is called only where SPLIT")
     }
     #[inline(always)]
     fn zero() -> Self {
@@ -232,8 +232,8 @@ mod x86 {
         type Lo = Self;
         type Hi = Self;
         #[inline(always)]
-        fn join(lo: Self, _: Self) -> Self {
-            lo
+        fn join(_: Self, _: Self) -> Self {
+            unreachable!("Lanes::join is called only where SPLIT")
         }
         #[inline(always)]
         fn zero() -> Self {
@@ -360,12 +360,14 @@ mod x86 {
     #[derive(Clone, Copy)]
     pub(crate) struct Avx2(__m256, __m256);
 
-    /// Half `H` (lanes 8H … 8H + 7) of an [`Avx2`] vector: loads and stores that half of a `V`.
+    /// Half `H` ∈ {0, 1} (lanes 8H … 8H + 7) of an [`Avx2`] vector: loads and stores that half
+    /// of a `V` (any other `H` fails to compile).
     #[derive(Clone, Copy)]
     pub(crate) struct Avx2Half<const H: usize>(__m256);
 
-    // SAFETY: as for `Avx2` (reached only from the AVX2 + FMA build); `V` is 64-byte aligned,
-    // so each half is 32-byte aligned.
+    // SAFETY: as for `Avx2` (reached only from the AVX2 + FMA build); `V` is 64-byte aligned
+    // with 16 f32, so for H ≤ 1 (asserted at compile time) each half is inside it and 32-byte
+    // aligned.
     impl<const H: usize> Ops for Avx2Half<H> {
         #[inline(always)]
         fn zero() -> Self {
@@ -377,10 +379,12 @@ mod x86 {
         }
         #[inline(always)]
         fn load(v: &V) -> Self {
+            const { assert!(H < 2) };
             Avx2Half(unsafe { _mm256_load_ps(v.0.as_ptr().add(8 * H)) })
         }
         #[inline(always)]
         fn store(self, v: &mut V) {
+            const { assert!(H < 2) };
             unsafe { _mm256_store_ps(v.0.as_mut_ptr().add(8 * H), self.0) }
         }
         #[inline(always)]
