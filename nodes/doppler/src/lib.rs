@@ -25,6 +25,7 @@ pub mod clutter;
 pub mod compensate;
 pub mod estimator;
 pub mod iir;
+mod lag_sums;
 pub mod packet;
 pub mod slowtime;
 pub mod sptrack;
