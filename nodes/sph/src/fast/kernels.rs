@@ -416,7 +416,7 @@ pub(super) unsafe fn geometry<L: Lanes, S: Shape>(
 /// `L::available()`; the slices of `inp` are padded with [`PAD`] entries; the scratch lanes hold
 /// 8 values per chunk.
 #[inline(always)]
-unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
+unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool, const SPLIT: bool>(
     inp: &RatesIn,
     sc: &mut Scratch,
     shifted: bool,
@@ -437,45 +437,59 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
     let (mut dsum, mut gcx, mut gcz) = (zero, zero, zero);
     let (mut gu0, mut gu1, mut gu2, mut gu3) = (zero, zero, zero, zero);
     let [pux, puz, pmp, pm, pv, pdev, pvd] = inp.ch.map(|c| c.as_ptr());
-    for (j, ck) in chunks.iter().enumerate() {
-        let i = ck.i as usize;
-        // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
-        let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
-        // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
-        let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
-        let (dx, dz, f, fr) = (lds(ldx), lds(ldz), lds(lf), lds(lfr));
-        let (gx, gz) = (dx.mul(fr), dz.mul(fr));
-        let dux = uax.sub(ld(pux));
-        let duz = uaz.sub(ld(puz));
-        let m = ld(pm);
-        drho = m.mul_add(duz.mul_add(gz, dux.mul(gx)), drho);
-        let pt = m.mul_add(pa, ld(pmp));
-        apx = pt.mul_add(gx, apx);
-        apz = pt.mul_add(gz, apz);
-        let v = ld(pv);
-        let kk = if !MV || EX { lds(lkk) } else { zero };
-        if MV {
-            let vw = v.mul(f);
-            s1 = dux.mul_add(vw, s1);
-            s2 = duz.mul_add(vw, s2);
-            s3 = s3.add(vw);
-        } else {
-            let vk = v.mul(kk);
-            s1 = vk.mul_add(dux, s1);
-            s2 = vk.mul_add(duz, s2);
-        }
-        if EX {
-            dsum = ld(pvd).mul(ld(pdev).sub(deva)).mul_add(kk, dsum);
-            let q = f.mul(inv_fdp);
-            let q2 = q.mul(q);
-            let corr = v.mul(q2.mul(q2).mul_add(c02, one));
-            gcx = corr.mul_add(gx, gcx);
-            gcz = corr.mul_add(gz, gcz);
-            let (vgx, vgz) = (v.mul(gx), v.mul(gz));
-            gu0 = dux.mul_add(vgx, gu0);
-            gu1 = dux.mul_add(vgz, gu1);
-            gu2 = duz.mul_add(vgx, gu2);
-            gu3 = duz.mul_add(vgz, gu3);
+    // With 16 vector registers (`SPLIT`: the AVX2 build) the 13 sums of the extra terms, their
+    // constants and temporaries do not fit in one loop, which then spills to the stack every chunk.
+    // Two loops over the chunks — the pressure, viscous and ∇u sums (parts 1 and 4), then δ-SPH
+    // and the shifting gradient (part 2) — re-load the chunk's lanes instead: rate phase 4–5 %
+    // faster on a Zen 2 (nodes/sph/PERF.md; other groupings were no faster or slower). Every sum sees the same operations
+    // in the same order either way (same bits: `avx_and_portable_lanes_give_the_same_bits`).
+    let parts: &[u8] = if EX && SPLIT { &[5, 2] } else { &[7] };
+    for &part in parts {
+        for (j, ck) in chunks.iter().enumerate() {
+            let i = ck.i as usize;
+            // SAFETY: i < n and the slices hold n + PAD ≥ i + 8 values (caller).
+            let ld = |p: *const f32| unsafe { L::load(p.add(i)) };
+            // SAFETY: the scratch lanes hold 8 per chunk, written by pass 1.
+            let lds = |p: *const f32| unsafe { L::load(p.add(8 * j)) };
+            let (dx, dz, fr) = (lds(ldx), lds(ldz), lds(lfr));
+            let (gx, gz) = (dx.mul(fr), dz.mul(fr));
+            let dux = uax.sub(ld(pux));
+            let duz = uaz.sub(ld(puz));
+            let v = ld(pv);
+            if part & 1 != 0 {
+                let f = lds(lf);
+                let m = ld(pm);
+                drho = m.mul_add(duz.mul_add(gz, dux.mul(gx)), drho);
+                let pt = m.mul_add(pa, ld(pmp));
+                apx = pt.mul_add(gx, apx);
+                apz = pt.mul_add(gz, apz);
+                if MV {
+                    let vw = v.mul(f);
+                    s1 = dux.mul_add(vw, s1);
+                    s2 = duz.mul_add(vw, s2);
+                    s3 = s3.add(vw);
+                } else {
+                    let vk = v.mul(lds(lkk));
+                    s1 = vk.mul_add(dux, s1);
+                    s2 = vk.mul_add(duz, s2);
+                }
+            }
+            if EX && part & 2 != 0 {
+                let kk = lds(lkk);
+                dsum = ld(pvd).mul(ld(pdev).sub(deva)).mul_add(kk, dsum);
+                let q = lds(lf).mul(inv_fdp);
+                let q2 = q.mul(q);
+                let corr = v.mul(q2.mul(q2).mul_add(c02, one));
+                gcx = corr.mul_add(gx, gcx);
+                gcz = corr.mul_add(gz, gcz);
+            }
+            if EX && part & 4 != 0 {
+                let (vgx, vgz) = (v.mul(gx), v.mul(gz));
+                gu0 = dux.mul_add(vgx, gu0);
+                gu1 = dux.mul_add(vgz, gu1);
+                gu2 = duz.mul_add(vgx, gu2);
+                gu3 = duz.mul_add(vgz, gu3);
+            }
         }
     }
     let mut s = Sums {
@@ -501,7 +515,7 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
 /// # Safety
 /// `L::available()`; the slices of `inp` are padded with [`PAD`] entries.
 #[inline(always)]
-pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: bool>(
+pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: bool, const SPLIT: bool>(
     inp: &RatesIn,
     c0: usize,
     c1: usize,
@@ -527,7 +541,7 @@ pub(super) unsafe fn rates_cells<L: Lanes, S: Shape, const MV: bool, const EX: b
             let inv_fdp =
                 if EX && k.shifting { (1.0 / (k.f_scalar)((ma / k.rho0).sqrt() * k.inv_h)) as f32 } else { 1.0 };
             // SAFETY: L::available() and padding (caller).
-            let sm = unsafe { pair_sums::<L, S, MV, EX>(inp, sc, shifted, a, inv_fdp) };
+            let sm = unsafe { pair_sums::<L, S, MV, EX, SPLIT>(inp, sc, shifted, a, inv_fdp) };
             out[a - base] = finish::<S, MV, EX>(k, &sm, ra);
         }
     }

@@ -634,7 +634,7 @@ fn rate_run<S: Shape, const MV: bool, const EX: bool>(
             }
             let _ = simd;
             // SAFETY: the portable lanes run everywhere.
-            unsafe { kernels::rates_cells::<Portable, S, MV, EX>(inp, c0, c1, o, buf) };
+            unsafe { kernels::rates_cells::<Portable, S, MV, EX, false>(inp, c0, c1, o, buf) };
         });
     });
 }
@@ -651,7 +651,7 @@ unsafe fn rates_avx<S: Shape, const MV: bool, const EX: bool>(
     buf: &mut Scratch,
 ) {
     // SAFETY: AVX2 and FMA (caller).
-    unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
+    unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX, true>(inp, c0, c1, out, buf) }
 }
 
 /// # Safety
@@ -666,7 +666,7 @@ unsafe fn rates_avx512<S: Shape, const MV: bool, const EX: bool>(
     buf: &mut Scratch,
 ) {
     // SAFETY: AVX2 and FMA (caller).
-    unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX>(inp, c0, c1, out, buf) }
+    unsafe { kernels::rates_cells::<lanes::Avx, S, MV, EX, false>(inp, c0, c1, out, buf) }
 }
 
 /// # Safety
