@@ -54,11 +54,6 @@ fn all_finite_c32(data: &[C32]) -> bool {
 /// The thread pool set by [`set_threads`] (`None`: rayon's global pool, one thread per core).
 static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);
 
-/// The workspace of the last `smoothn` call (kept if at most [`SMOOTHN_CACHE_BYTES`]).
-static SMOOTHN_WS: Mutex<Option<Smoothn>> = Mutex::new(None);
-/// Largest workspace kept between `smoothn` calls (64 MiB: a 2 × 512 × 512 field).
-const SMOOTHN_CACHE_BYTES: usize = 64 << 20;
-
 fn pool() -> Option<Arc<rayon::ThreadPool>> {
     POOL.lock().map(|p| p.clone()).unwrap_or(None)
 }
@@ -557,25 +552,9 @@ fn smoothn<'py>(
     }
     let shape: Vec<usize> = y.shape().to_vec();
     let (out, report) = compute(py, || -> PyResult<_> {
-        // The last workspace is kept for the next call of the same shape (its plan and buffers;
-        // a reused workspace gives the same result, tested in sonoflow-regularise). Taken out of
-        // the cache while in use, so concurrent calls each get their own.
-        let cached = SMOOTHN_WS
-            .lock()
-            .ok()
-            .and_then(|mut c| c.take())
-            .filter(|ws| ws.shape() == grid.as_slice() && ws.components() == components);
-        let mut ws = match cached {
-            Some(ws) => ws,
-            None => Smoothn::new(&grid, components).map_err(|e| value_error("y", e))?,
-        };
+        let mut ws = Smoothn::new(&grid, components).map_err(|e| value_error("y", e))?;
         let mut out = vec![0.0; n * components];
         let report = ws.smooth(data, w, &params, &mut out).map_err(|e| value_error("smoothn", e))?;
-        if ws.workspace_bytes() <= SMOOTHN_CACHE_BYTES {
-            if let Ok(mut c) = SMOOTHN_WS.lock() {
-                *c = Some(ws);
-            }
-        }
         Ok((out, report))
     })?;
     let arr = PyArray1::from_vec(py, out).reshape(shape)?;
