@@ -441,8 +441,9 @@ unsafe fn pair_sums<L: Lanes, S: Shape, const MV: bool, const EX: bool, const SP
     // constants and temporaries do not fit in one loop, which then spills to the stack every chunk.
     // Two loops over the chunks — the pressure, viscous and ∇u sums (parts 1 and 4), then δ-SPH
     // and the shifting gradient (part 2) — re-load the chunk's lanes instead: rate phase 4–5 %
-    // faster on a Zen 2 (nodes/sph/PERF.md; other groupings were no faster or slower). Every sum sees the same operations
-    // in the same order either way (same bits: `avx_and_portable_lanes_give_the_same_bits`).
+    // faster on a Zen 2 (nodes/sph/PERF.md; other groupings were no faster or slower). Every sum
+    // sees the same operations in the same order either way (same bits:
+    // `avx_and_portable_lanes_give_the_same_bits`).
     let parts: &[u8] = if EX && SPLIT { &[5, 2] } else { &[7] };
     for &part in parts {
         for (j, ck) in chunks.iter().enumerate() {
