@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release -p sonoflow-simus --example simus_bench -- [--scatterers N] [--frames F]
 //!     [--threads T] [--accuracy fast|exact] [--reanchor K] [--block B] [--portable | --avx2]
-//!     [--seed S] [--tilt DEG] [--ffd] [--write DIR]
+//!     [--seed S] [--tilt DEG] [--ffd] [--window must|compact] [--write DIR]
 //! ```
 //! Prints seconds per frame (median of F frames after one warm-up frame) and GFLOP/s counted as
 //! in ultrasound-anchors §4.1: `(6M + 2(M−1) + 8 + 8)` flop per (scatterer, element, bin) — M
@@ -19,7 +19,7 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use sonoflow_simus::{Accuracy, KernelChoice, Medium, Probe, Scatterers, Simus, SimusOptions, Transmit};
+use sonoflow_simus::{Accuracy, KernelChoice, Medium, Probe, RfWindow, Scatterers, Simus, SimusOptions, Transmit};
 
 /// Writes f32 data in C order through sonoflow-fileio (atomic, npyz).
 fn write_npy(path: &std::path::Path, shape: &[usize], data: &[f32]) -> std::io::Result<()> {
@@ -38,6 +38,7 @@ struct Args {
     tilt_deg: f64,
     kernel: KernelChoice,
     seed: u64,
+    window: RfWindow,
     write: Option<std::path::PathBuf>,
 }
 
@@ -54,6 +55,7 @@ fn parse() -> Result<Args, String> {
         tilt_deg: 0.0,
         kernel: KernelChoice::Auto,
         seed: 2018,
+        window: RfWindow::Must,
         write: None,
     };
     let mut it = std::env::args().skip(1);
@@ -70,6 +72,13 @@ fn parse() -> Result<Args, String> {
             "--ffd" => a.ffd = true,
             "--tilt" => a.tilt_deg = val()?.parse().map_err(|e| format!("{e}"))?,
             "--avx2" => a.kernel = KernelChoice::Avx2,
+            "--window" => {
+                a.window = match val()?.as_str() {
+                    "must" => RfWindow::Must,
+                    "compact" => RfWindow::Compact,
+                    w => return Err(format!("--window: '{w}' is not must or compact")),
+                }
+            }
             "--seed" => a.seed = val()?.parse().map_err(|e| format!("{e}"))?,
             "--write" => a.write = Some(val()?.into()),
             "--help" | "-h" => return Err("see the doc comment of examples/simus_bench.rs".into()),
@@ -105,6 +114,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         threads: a.threads,
         full_frequency_directivity: a.ffd,
         kernel: if a.portable { KernelChoice::Portable } else { a.kernel },
+        window: a.window,
         ..SimusOptions::default()
     };
     let mut simus = Simus::new(probe.clone(), medium.clone(), options)?;

@@ -16,6 +16,13 @@
 //!    keeping the first `(nf + 1)/2` samples; sample k is at `t0 + k/fs`, `t0 = 0` (the instant the
 //!    centre of the pulse leaves an element with zero delay).
 //!
+//! With [`RfWindow::Compact`] (not MUST's) step 2 drops the factor 2 — the window `1/df0` holds the
+//! longest round trip (with the pulse margins of step 1) once, plus one pulse duration so that the
+//! leading half of a pulse that starts before t = 0 wraps past the samples kept — and step 5 keeps
+//! as many samples as MUST's plan for the same scene: about half the bins, the same samples. The
+//! spectrum is scaled with MUST's step for the same scene ([`FrequencyPlan::gain_df`]), so the RF
+//! has MUST's gain.
+//!
 //! MUST re-plans on every call, so the length and the gain (∝ df) of the RF change with the
 //! scene. [`crate::Simus::plan_for_max_distance`] (or [`crate::PlanMode::MaxDistance`]) fixes the
 //! grid for a whole packet instead.
@@ -24,6 +31,7 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 use crate::error::{invalid, Result};
+use crate::params::RfWindow;
 use crate::pulse::PulseModel;
 
 /// The frequency grid and RF geometry used for one or more frames.
@@ -39,8 +47,15 @@ pub struct FrequencyPlan {
     pub band_last: usize,
     /// Length of the inverse real FFT (MUST `nf`).
     pub n_fft: usize,
-    /// RF samples per element, `(n_fft + 1) / 2`.
+    /// RF samples per element: `(n_fft + 1) / 2` (MUST's window); MUST's count for the same scene,
+    /// at most `n_fft` (compact window).
     pub n_samples: usize,
+    /// The RF window the plan was made with.
+    #[serde(default)]
+    pub window: RfWindow,
+    /// Frequency step (Hz) that sets the RF's gain: `df` for MUST's window, MUST's `df` for the
+    /// same scene for the compact one (MUST's RF scales with its step, pymust-notes §5.9).
+    pub gain_df: f64,
     /// Sampling frequency (Hz).
     pub fs: f64,
     /// Time of sample 0 (s): 0.
@@ -63,6 +78,7 @@ pub(crate) struct PlanInputs {
     pub fs: f64,
     pub db_thresh: f64,
     pub frequency_step: f64,
+    pub window: RfWindow,
     pub pulse: PulseModel,
     pub pulse_duration: f64,
 }
@@ -83,7 +99,8 @@ impl FrequencyPlan {
         (self.frequency(self.band_first), self.frequency(self.band_last))
     }
 
-    /// Longest round trip (s) this plan holds without circular aliasing: `1/df`.
+    /// Longest round trip (s) this plan holds without circular aliasing: `1/df` (the RF keeps the
+    /// first half of it with MUST's window, all but about one pulse duration with the compact one).
     pub fn window(&self) -> f64 {
         1.0 / self.df
     }
@@ -96,18 +113,27 @@ impl FrequencyPlan {
             return Err(invalid("plan.max_distance", max_element_distance, "finite and >= 0 (m)"));
         }
         let max_d = max_element_distance + inp.pulse_duration * inp.c;
-        let mut df0 = 1.0 / 2.0 / (2.0 * max_d / inp.c + max_delay);
-        df0 *= inp.frequency_step;
-        let nf_half = (inp.fc / df0).ceil();
-        if !(nf_half.is_finite() && nf_half <= 5.0e7) {
-            return Err(invalid(
-                "plan.max_distance",
-                max_element_distance,
-                "small enough that the grid has <= 1e8 bins (fc / df)",
-            ));
-        }
-        let n_freq = 2 * nf_half as usize + 1;
-        let df = 2.0 * inp.fc / (n_freq - 1) as f64;
+        // MUST: the window 1/df0 holds twice the longest round trip; compact: once
+        let round_trip = 2.0 * max_d / inp.c + max_delay;
+        let grid = |df0: f64| -> Result<(usize, f64)> {
+            let nf_half = (inp.fc / df0).ceil();
+            if !(nf_half.is_finite() && nf_half <= 5.0e7) {
+                return Err(invalid(
+                    "plan.max_distance",
+                    max_element_distance,
+                    "small enough that the grid has <= 1e8 bins (fc / df)",
+                ));
+            }
+            let n_freq = 2 * nf_half as usize + 1;
+            Ok((n_freq, 2.0 * inp.fc / (n_freq - 1) as f64))
+        };
+        let (must_n_freq, must_df) = grid(1.0 / 2.0 / round_trip * inp.frequency_step)?;
+        let (n_freq, df) = match inp.window {
+            RfWindow::Must => (must_n_freq, must_df),
+            // one pulse duration more: a pulse's leading half that starts before t = 0 (scatterers
+            // within ~c·tp/4 of an element) wraps to the window's end, past the samples kept
+            RfWindow::Compact => grid(1.0 / (round_trip + inp.pulse_duration) * inp.frequency_step)?,
+        };
         // band: |P H| above db_thresh relative to its maximum over the grid
         let mag: Vec<f64> = (0..n_freq)
             .map(|k| {
@@ -120,13 +146,18 @@ impl FrequencyPlan {
         let band_first = mag.iter().position(keep).unwrap_or(0);
         let band_last = mag.iter().rposition(keep).unwrap_or(0);
         let n_fft = (inp.fs / 2.0 / inp.fc * (n_freq - 1) as f64).ceil() as usize;
+        // MUST's sample count for this scene; the compact window holds at least as many
+        let must_n_fft = (inp.fs / 2.0 / inp.fc * (must_n_freq - 1) as f64).ceil() as usize;
+        let n_samples = must_n_fft.div_ceil(2).min(n_fft);
         Ok(Self {
             df,
             n_freq,
             band_first,
             band_last,
             n_fft,
-            n_samples: n_fft.div_ceil(2),
+            n_samples,
+            window: inp.window,
+            gain_df: must_df,
             fs: inp.fs,
             t0: 0.0,
             max_distance: max_d,

@@ -80,7 +80,7 @@ pub use error::{Result, SimusError};
 pub use grid::FrequencyPlan;
 pub use must::{MustParam, MustParts};
 pub use noise::{NoiseModel, NoiseParams};
-pub use params::{Accuracy, KernelChoice, Medium, PlanMode, SimusOptions};
+pub use params::{Accuracy, KernelChoice, Medium, PlanMode, RfWindow, SimusOptions};
 pub use phantom::{genscat, must_meandist, resolution_cell_area, Inclusion, Phantom, PhantomParams};
 pub use pressure::{pfield, pfield_3d, PfieldOptions, PressureField};
 pub use probe::{Baffle, ElementPosition, Probe, PRESET_NAMES};

@@ -62,6 +62,22 @@ pub enum PlanMode {
     },
 }
 
+/// How long the RF time window is, which sets the frequency step (see [`crate::FrequencyPlan`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RfWindow {
+    /// MUST/PyMUST: the window holds **twice** the longest round trip (plus the pulse margins)
+    /// and the RF keeps its first half.
+    #[default]
+    Must,
+    /// The window holds the longest round trip once (with MUST's margins, plus one pulse
+    /// duration) and the RF keeps MUST's samples of it: about half the frequency bins, so about
+    /// half the work, for the same RF up to the pulse's tails (the continuous spectrum is the
+    /// same, sampled more coarsely but still finely enough for echoes of that duration). The RF
+    /// has MUST's length and gain (the spectrum is scaled with MUST's step).
+    Compact,
+}
+
 fn default_reanchor() -> u32 {
     128
 }
@@ -139,6 +155,10 @@ pub struct SimusOptions {
     /// MUST `FrequencyStep`, default 1.
     #[serde(default = "default_one", alias = "FrequencyStep", alias = "frequencystep")]
     pub frequency_step: f64,
+    /// RF time window: MUST's (twice the longest round trip, the default) or `compact` (once:
+    /// about half the work, the same samples up to the pulse's tails; see [`RfWindow`]).
+    #[serde(default)]
+    pub window: RfWindow,
     /// Element directivity evaluated at every frequency (`true`) or at fc only (`false`, MUST's
     /// default). MUST `FullFrequencyDirectivity`. Costs ~2.5× in the fast mode (one f32 sinc per
     /// sub-element and bin); changes the paper scene's RF by nRMS ~1e-2.
@@ -174,6 +194,7 @@ impl Default for SimusOptions {
             fs: None,
             db_thresh: -100.0,
             frequency_step: 1.0,
+            window: RfWindow::Must,
             full_frequency_directivity: false,
             element_splitting: None,
             zero_small_values: true,

@@ -19,7 +19,7 @@ use crate::exact::{accumulate_elevation, accumulate_exact, ElevationBlock, Table
 use crate::grid::{FrequencyPlan, PlanInputs};
 use crate::kernel::simd::Simd;
 use crate::kernel::{Scratch, Tables, G, L, TX_COMPLEX, TX_REAL, TX_UNIT, V};
-use crate::params::{Accuracy, Medium, PlanMode, SimusOptions};
+use crate::params::{Accuracy, Medium, PlanMode, RfWindow, SimusOptions};
 use crate::pfield::{ArrayGeom, BlockGeom, ScattererGeom};
 use crate::probe::Probe;
 use crate::pulse::PulseModel;
@@ -115,6 +115,7 @@ impl Simus {
             fs: options.fs.unwrap_or(4.0 * fc),
             db_thresh: options.db_thresh,
             frequency_step: options.frequency_step,
+            window: options.window,
             pulse,
             pulse_duration: pulse.two_way_pulse_duration(),
         };
@@ -306,7 +307,12 @@ impl Simus {
             && plan.band_first <= plan.band_last
             && plan.band_last < plan.n_freq
             && plan.band_last <= plan.n_fft / 2
-            && plan.n_samples == plan.n_fft.div_ceil(2)
+            && match plan.window {
+                RfWindow::Must => plan.n_samples == plan.n_fft.div_ceil(2),
+                RfWindow::Compact => plan.n_samples >= 1 && plan.n_samples <= plan.n_fft,
+            }
+            && plan.gain_df.is_finite()
+            && plan.gain_df > 0.0
             && (plan.df - 2.0 * plan.fc / (plan.n_freq - 1) as f64).abs() <= 1e-9 * plan.df;
         if !consistent {
             return Err(SimusError::PlanMismatch("inconsistent grid (df, n_freq, band, n_fft)"));
@@ -436,7 +442,7 @@ impl Simus {
         ws.scale.extend(ws.tab.freqs.iter().map(|&f| {
             let w = 2.0 * std::f64::consts::PI * f;
             let h = self.plan_inputs.pulse.probe(w);
-            self.plan_inputs.pulse.pulse_im(w) * h * h * plan.df * if width_factor { self.geom.width } else { 1.0 }
+            self.plan_inputs.pulse.pulse_im(w) * h * h * plan.gain_df * if width_factor { self.geom.width } else { 1.0 }
         }));
         let scale = &ws.scale;
         let inv_n = 1.0 / n as f64;
