@@ -92,6 +92,20 @@ def test_simus_matches_pymust_plane_wave(l12_scene):
     assert nrms(rf, rf_pm) <= 1e-4
 
 
+def test_simus_compact_window_gives_the_same_rf(l12_scene):
+    """sonoflow's ``Window = "compact"`` option: the same shape as PyMUST's RF and the same RF as
+    MUST's window to the fast kernel's rounding (nodes/simus/tests/window.rs: ~2e-6); a bad value
+    names the field."""
+    x, z, rc, p, dels, rf_pm = l12_scene
+    rf_must, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p))
+    rf, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "compact"})
+    assert rf.shape == rf_must.shape
+    assert nrms(rf, rf_must) <= 1e-5
+    assert nrms(rf, rf_pm) <= 1e-4
+    with pytest.raises(ValueError, match="options.Window"):
+        sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "half"})
+
+
 def test_simus_matches_pymust_focused_phased_array():
     """P4-2v (64 elements, 2.7 MHz), focused at 40 mm, 25 scatterers; TXnow 2 and fs 5 fc through
     param, dBThresh through options."""

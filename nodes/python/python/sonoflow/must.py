@@ -151,10 +151,16 @@ def _options_json(options):
             continue
         if k == "FullFrequencyDirectivity":
             out["full_frequency_directivity"] = bool(v)
+        elif k == "Window":
+            # sonoflow's, not MUST's: "compact" halves the frequency bins for the same RF
+            if not isinstance(v, str) or v.lower() not in ("must", "compact"):
+                raise ValueError(f"options.Window: {v!r} is not 'must' (the default) or 'compact'")
+            out["window"] = v.lower()
         elif k in names:
             out[names[k]] = number(o, k, "options", integer=k == "ElementSplitting")
         else:
-            raise ValueError(f"options.{k}: unknown option (allowed: {', '.join(list(names) + ['FullFrequencyDirectivity'])})")
+            allowed = list(names) + ["FullFrequencyDirectivity", "Window"]
+            raise ValueError(f"options.{k}: unknown option (allowed: {', '.join(allowed)})")
     return out
 
 
@@ -166,6 +172,11 @@ def simus(*args):
     receive — computed with the exact float64 kernel, slower). ``x``, ``z``, ``RC`` any shape (flattened), ``delaysTX`` one row of
     ``txdelay``; RF has shape (n_samples, Nelements), sample k at k/fs (fs = ``param.fs``, default
     4 fc; ``param.fs`` is set as PyMUST does).
+
+    ``options`` takes MUST's fields and sonoflow's ``Window``: ``"must"`` (default: MUST's time
+    window, twice the longest round trip) or ``"compact"`` (once, plus a pulse duration: about half
+    the frequency bins and half the time for the same RF — the same shape and gain, nRMS ~2e-6
+    against the default; nodes/simus/README.md).
 
     Differences: RF is float32 (PyMUST float64; the RFs agree to nRMS ~2e-5) and a
     Fortran-ordered view of sonoflow's element-major buffer (no copy); the second output is
