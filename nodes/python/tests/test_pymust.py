@@ -93,17 +93,27 @@ def test_simus_matches_pymust_plane_wave(l12_scene):
 
 
 def test_simus_compact_window_gives_the_same_rf(l12_scene):
-    """sonoflow's ``Window = "compact"`` option: the same shape as PyMUST's RF and the same RF as
-    MUST's window to the fast kernel's rounding (nodes/simus/tests/window.rs: ~2e-6); a bad value
-    names the field."""
+    """sonoflow's ``Window`` option: the compact window (the default) gives the same shape as
+    PyMUST's RF and the same RF as MUST's window (``"must"``) to the fast kernel's rounding
+    (nodes/simus/tests/window.rs: ~2e-6); a bad value names the field."""
     x, z, rc, p, dels, rf_pm = l12_scene
-    rf_must, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p))
-    rf, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "compact"})
+    rf_must, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "must"})
+    rf, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p))
+    rf_c, _ = sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "compact"})
+    assert np.array_equal(rf, rf_c)
+    assert nrms(rf_must, rf_pm) <= 1e-4
     assert rf.shape == rf_must.shape
     assert nrms(rf, rf_must) <= 1e-5
     assert nrms(rf, rf_pm) <= 1e-4
     with pytest.raises(ValueError, match="options.Window"):
         sf.simus(x, z, rc, dels, copy.deepcopy(p), {"Window": "half"})
+    # off the imaging plane MUST's window is used by default; asking for the compact one is an error
+    y = np.full(np.shape(x), 1e-3)
+    rf3, _ = sf.simus(x, y, z, rc, dels, copy.deepcopy(p))
+    rf3_must, _ = sf.simus(x, y, z, rc, dels, copy.deepcopy(p), {"Window": "must"})
+    assert np.array_equal(rf3, rf3_must)
+    with pytest.raises(ValueError, match="window"):
+        sf.simus(x, y, z, rc, dels, copy.deepcopy(p), {"Window": "compact"})
 
 
 def test_simus_matches_pymust_focused_phased_array():

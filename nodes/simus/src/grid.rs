@@ -17,11 +17,12 @@
 //!    centre of the pulse leaves an element with zero delay).
 //!
 //! With [`RfWindow::Compact`] (not MUST's) step 2 drops the factor 2 — the window `1/df0` holds the
-//! longest round trip (with the pulse margins of step 1) once, plus one pulse duration so that the
-//! leading half of a pulse that starts before t = 0 wraps past the samples kept — and step 5 keeps
-//! as many samples as MUST's plan for the same scene: about half the bins, the same samples. The
-//! spectrum is scaled with MUST's step for the same scene ([`FrequencyPlan::gain_df`]), so the RF
-//! has MUST's gain.
+//! longest round trip (with the pulse margins of step 1) once, or MUST's kept samples if
+//! `FrequencyStep` < 1 makes them longer, plus one pulse duration so that the leading half of a
+//! pulse that starts before t = 0 wraps past the samples kept — and step 5 keeps as many samples as
+//! MUST's plan for the same scene (`FrequencyStep` > 1 shortens them, as in MUST, but never makes
+//! echoes wrap onto them): about half the bins, the same samples. The spectrum is scaled with
+//! MUST's step for the same scene ([`FrequencyPlan::gain_df`]), so the RF has MUST's gain.
 //!
 //! MUST re-plans on every call, so the length and the gain (∝ df) of the RF change with the
 //! scene. [`crate::Simus::plan_for_max_distance`] (or [`crate::PlanMode::MaxDistance`]) fixes the
@@ -128,11 +129,19 @@ impl FrequencyPlan {
             Ok((n_freq, 2.0 * inp.fc / (n_freq - 1) as f64))
         };
         let (must_n_freq, must_df) = grid(1.0 / 2.0 / round_trip * inp.frequency_step)?;
+        // MUST's sample count for this scene (the compact window keeps as many)
+        let must_n_fft = (inp.fs / 2.0 / inp.fc * (must_n_freq - 1) as f64).ceil() as usize;
+        let must_n_samples = must_n_fft.div_ceil(2);
         let (n_freq, df) = match inp.window {
             RfWindow::Must => (must_n_freq, must_df),
-            // one pulse duration more: a pulse's leading half that starts before t = 0 (scatterers
-            // within ~c·tp/4 of an element) wraps to the window's end, past the samples kept
-            RfWindow::Compact => grid(1.0 / (round_trip + inp.pulse_duration) * inp.frequency_step)?,
+            // the echoes (≤ the round trip) and the kept samples (shorter than the round trip when
+            // FrequencyStep > 1, longer when < 1), plus one pulse duration: a pulse's leading half
+            // that starts before t = 0 (scatterers within ~c·tp/4 of an element) wraps to the
+            // window's end, past the samples kept
+            RfWindow::Compact => {
+                let kept = must_n_samples as f64 / inp.fs;
+                grid(1.0 / (round_trip.max(kept) + inp.pulse_duration))?
+            }
         };
         // band: |P H| above db_thresh relative to its maximum over the grid
         let mag: Vec<f64> = (0..n_freq)
@@ -146,9 +155,7 @@ impl FrequencyPlan {
         let band_first = mag.iter().position(keep).unwrap_or(0);
         let band_last = mag.iter().rposition(keep).unwrap_or(0);
         let n_fft = (inp.fs / 2.0 / inp.fc * (n_freq - 1) as f64).ceil() as usize;
-        // MUST's sample count for this scene; the compact window holds at least as many
-        let must_n_fft = (inp.fs / 2.0 / inp.fc * (must_n_freq - 1) as f64).ceil() as usize;
-        let n_samples = must_n_fft.div_ceil(2).min(n_fft);
+        let n_samples = must_n_samples.min(n_fft);
         Ok(Self {
             df,
             n_freq,

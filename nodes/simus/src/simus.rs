@@ -263,6 +263,15 @@ impl Simus {
     ) -> Result<()> {
         s.validate()?;
         let elev = match y {
+            Some(_) if plan.window == RfWindow::Compact => {
+                // MUST's elevation factor is evaluated on every 20th bin of MUST's grid and
+                // interpolated between: it depends on the grid, so only MUST's window gives MUST's RF
+                return Err(crate::error::invalid(
+                    "options.window",
+                    "compact",
+                    "\"must\" for scatterers off the imaging plane (MUST's elevation model samples MUST's own frequency grid)",
+                ));
+            }
             Some(y) => {
                 let (h, rf) = crate::pressure::elevation_params(&self.probe)?;
                 let planar = y.iter().all(|v| v.abs() < f32::EPSILON);

@@ -27,8 +27,14 @@ fn options(window: RfWindow, accuracy: Accuracy) -> SimusOptions {
 
 /// RF of both windows (MUST's first), each with its own per-call plan.
 fn both(probe: &Probe, medium: &Medium, s: &Scatterers, tx: &Transmit, acc: Accuracy) -> [(Vec<f32>, usize); 2] {
-    [RfWindow::Must, RfWindow::Compact].map(|w| {
-        let mut simus = Simus::new(probe.clone(), medium.clone(), options(w, acc.clone())).unwrap();
+    both_with(probe, medium, s, tx, options(RfWindow::Must, acc))
+}
+
+/// [`both`] with other options (their `window` is replaced).
+fn both_with(probe: &Probe, medium: &Medium, s: &Scatterers, tx: &Transmit, o: SimusOptions) -> [(Vec<f32>, usize); 2] {
+    [RfWindow::Must, RfWindow::Compact].map(|window| {
+        let o = SimusOptions { window, ..o.clone() };
+        let mut simus = Simus::new(probe.clone(), medium.clone(), o).unwrap();
         let rf = simus.simulate(s, tx).unwrap();
         (rf.data, rf.n_samples)
     })
@@ -105,6 +111,25 @@ fn compact_window_gives_the_same_rf() {
     }
 }
 
+/// MUST's `FrequencyStep` ≠ 1: finer (0.7: MUST keeps more samples than the round trip) and
+/// coarser (1.5: MUST keeps fewer — its RF ends before the deepest echoes — but nothing wraps onto
+/// them). The compact window keeps MUST's samples in both cases and never lets an echo wrap onto
+/// them (its window holds the longer of the round trip and the kept samples, plus a pulse).
+#[test]
+fn compact_window_with_other_frequency_steps() {
+    let probe = Probe::paper_5mhz();
+    let medium = Medium::default();
+    let s = scene(150, 5, (0.005, 0.045));
+    let tx = Transmit::plane_wave(&probe, medium.c, 0.0).unwrap();
+    for step in [0.7, 1.5] {
+        let o = SimusOptions { frequency_step: step, ..options(RfWindow::Must, Accuracy::Exact) };
+        let [m, c] = both_with(&probe, &medium, &s, &tx, o);
+        let (e, worst) = compare(&m, &c);
+        println!("FrequencyStep {step}: compact vs MUST window (exact mode) nRMS {e:.2e}, largest {worst:.1e}");
+        assert!(e < 2e-7 && worst < 2e-7, "step {step}: nRMS {e:e}, largest {worst:e}");
+    }
+}
+
 /// The default fast mode: the compact window changes the RF by no more than the kernel's own
 /// rounding (MUST's window fast vs exact ~2e-6).
 #[test]
@@ -117,4 +142,18 @@ fn compact_window_in_the_fast_mode() {
     let (e, _) = compare(&m, &c);
     println!("fast mode, 2000 scatterers: compact vs MUST window nRMS {e:.2e}");
     assert!(e < 1e-5, "{e:e}");
+}
+
+/// MUST's elevation model samples its factor on every 20th bin of MUST's own grid, so scatterers
+/// off the imaging plane need MUST's window: the compact one is an error naming the field.
+#[test]
+fn compact_window_is_refused_off_the_imaging_plane() {
+    let probe = Probe::paper_5mhz();
+    let medium = Medium::default();
+    let s = scene(10, 3, (0.01, 0.03));
+    let y = vec![1e-3f32; s.x.len()];
+    let tx = Transmit::plane_wave(&probe, medium.c, 0.0).unwrap();
+    let mut simus = Simus::new(probe, medium, options(RfWindow::Compact, Accuracy::default())).unwrap();
+    let e = simus.simulate_3d(&s, &y, &tx).unwrap_err().to_string();
+    assert!(e.contains("options.window") && e.contains("must"), "{e}");
 }

@@ -142,16 +142,17 @@ def _delays(delaysTX, n, name="delaysTX"):
     return np.ascontiguousarray(d)
 
 
-def _options_json(options):
+def _options_json(options, simus=True):
     o = canonical(options, "options")
-    out = {}
+    # simus: sonoflow computes MUST's RF on the compact window unless told otherwise (see simus)
+    out = {"window": "compact"} if simus else {}
     names = {"dBThresh": "db_thresh", "FrequencyStep": "frequency_step", "ElementSplitting": "element_splitting"}
     for k, v in o.items():
         if k in ("ParPool", "WaitBar", "CallFun"):
             continue
         if k == "FullFrequencyDirectivity":
             out["full_frequency_directivity"] = bool(v)
-        elif k == "Window":
+        elif k == "Window" and simus:
             # sonoflow's, not MUST's: "compact" halves the frequency bins for the same RF
             if not isinstance(v, str) or v.lower() not in ("must", "compact"):
                 raise ValueError(f"options.Window: {v!r} is not 'must' (the default) or 'compact'")
@@ -159,7 +160,7 @@ def _options_json(options):
         elif k in names:
             out[names[k]] = number(o, k, "options", integer=k == "ElementSplitting")
         else:
-            allowed = list(names) + ["FullFrequencyDirectivity", "Window"]
+            allowed = list(names) + ["FullFrequencyDirectivity"] + (["Window"] if simus else [])
             raise ValueError(f"options.{k}: unknown option (allowed: {', '.join(allowed)})")
     return out
 
@@ -173,10 +174,14 @@ def simus(*args):
     ``txdelay``; RF has shape (n_samples, Nelements), sample k at k/fs (fs = ``param.fs``, default
     4 fc; ``param.fs`` is set as PyMUST does).
 
-    ``options`` takes MUST's fields and sonoflow's ``Window``: ``"must"`` (default: MUST's time
-    window, twice the longest round trip) or ``"compact"`` (once, plus a pulse duration: about half
-    the frequency bins and half the time for the same RF — the same shape and gain, nRMS ~2e-6
-    against the default; nodes/simus/README.md).
+    ``options`` takes MUST's fields and sonoflow's ``Window``: ``"compact"`` (the default here) or
+    ``"must"``. MUST's frequency step makes the RF's time window hold twice the longest round trip
+    and keeps the first half; the compact window holds it once plus a pulse duration, so sonoflow
+    computes about half the frequency bins for the same RF (same shape, times and gain; nRMS ~2e-6
+    against MUST's window, ten times below the float32-vs-float64 difference from PyMUST;
+    nodes/simus/README.md). ``{"Window": "must"}`` uses MUST's frequency grid exactly. With ``y`` off
+    the plane MUST's window is used (its elevation factor is sampled on MUST's own grid);
+    ``"compact"`` there is a ValueError.
 
     Differences: RF is float32 (PyMUST float64; the RFs agree to nRMS ~2e-5) and a
     Fortran-ordered view of sonoflow's element-major buffer (no copy); the second output is
@@ -204,7 +209,11 @@ def simus(*args):
     n = number(p, "Nelements", required=True, lo=1, integer=True)
     d = _delays(delays, n)
     pj = probe_json(p, delays=d)
-    rf, fs, t0 = _native.simus(xs[0], xs[1], xs[2], dumps(pj), dumps(_options_json(options)), ys)
+    o = _options_json(options)
+    off_plane = ys is not None and bool(np.any(np.abs(ys) >= 1e-9))  # as the library decides
+    if off_plane and not (options is not None and "Window" in canonical(options, "options")):
+        o["window"] = "must"  # MUST's elevation model samples MUST's own frequency grid
+    rf, fs, t0 = _native.simus(xs[0], xs[1], xs[2], dumps(pj), dumps(o), ys)
     rf = rf.T
     if t0 > 0:
         lead = int(round(t0 * fs))
@@ -685,7 +694,7 @@ def pfield(x, y, z, delaysTX, param, isQuick=False, options=None):
     if np.any(d_in[np.isfinite(d_in)] < 0):
         raise ValueError("delaysTX: must be ≥ 0 s (NaN: element off)")
     pj = probe_json(p, delays=d)
-    o = _options_json(options)
+    o = _options_json(options, simus=False)
     if isQuick:
         o.update(db_thresh=-20.0, element_splitting=1, full_frequency_directivity=False, frequency_step=1.5)
     o.setdefault("db_thresh", -60.0)
