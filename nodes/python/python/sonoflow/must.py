@@ -155,7 +155,7 @@ def _options_json(options, simus=True):
         elif k == "Window" and simus:
             # sonoflow's, not MUST's: "compact" halves the frequency bins for the same RF
             if not isinstance(v, str) or v.lower() not in ("must", "compact"):
-                raise ValueError(f"options.Window: {v!r} is not 'must' (the default) or 'compact'")
+                raise ValueError(f"options.Window: {v!r} is not 'compact' (the default) or 'must'")
             out["window"] = v.lower()
         elif k in names:
             out[names[k]] = number(o, k, "options", integer=k == "ElementSplitting")
