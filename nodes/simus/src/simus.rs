@@ -583,6 +583,10 @@ fn fold(sc: &mut Scratch, u: &mut [f64], ep: usize) {
     }
 }
 
+/// Below this ρ the factor of [`zero_small_values`] is exactly 0: ½(1 + tanh(−7.6)) = 2.5e-7,
+/// which rounds to 0 steps of 1e-6.
+pub(crate) const ZERO_BELOW: f64 = 2.4e-6;
+
 /// PyMUST simus.py step 10: `RF *= round(½(1 + tanh((ρ − 1e-5)/1e-6)) / 1e-6)·1e-6`,
 /// `ρ = |RF| / max|RF|` — a quantised soft threshold at −100 dB. No-op on an all-zero frame.
 pub fn zero_small_values(rf: &mut [f32]) {
@@ -595,6 +599,12 @@ pub fn zero_small_values(rf: &mut [f32]) {
         let rho = f64::from(v.abs()) / f64::from(peak);
         if rho > thr + 2e-5 {
             continue; // factor is exactly 1 there
+        }
+        if rho < ZERO_BELOW {
+            // the quantised factor is exactly 0 there (the step < 2.6e-7 rounds to 0 µ-steps);
+            // skipping tanh and round leaves the same bits, signed zero included
+            *v = (f64::from(*v) * 0.0) as f32;
+            continue;
         }
         let step = 0.5 * (1.0 + ((rho - thr) / (thr / 10.0)).tanh());
         let q = (step / (thr / 10.0)).round() * (thr / 10.0);

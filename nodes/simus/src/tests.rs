@@ -1,6 +1,7 @@
 //! Unit tests: parameters (serde, MUST aliases, validation), presets, plan, helpers.
 
 use crate::*;
+use crate::simus::ZERO_BELOW;
 
 #[test]
 fn probe_loads_from_toml_and_json_with_must_aliases() {
@@ -185,6 +186,31 @@ fn zero_small_values_matches_pymust_step() {
     let mut at = vec![1.0f32, 1e-5];
     zero_small_values(&mut at);
     assert!((at[1] - 0.5e-5).abs() < 1e-11, "{}", at[1]);
+}
+
+#[test]
+fn zero_small_values_shortcut_keeps_the_bits() {
+    // the shortcut below ρ = 2.4e-6 against the formula it skips, on a fine sweep of ρ (both signs)
+    let peak = 1.0f32;
+    let formula = |v: f32| -> f32 {
+        let (thr, rho) = (1e-5f64, f64::from(v.abs()) / f64::from(peak));
+        if rho > thr + 2e-5 {
+            return v;
+        }
+        let step = 0.5 * (1.0 + ((rho - thr) / (thr / 10.0)).tanh());
+        ((f64::from(v)) * ((step / (thr / 10.0)).round() * (thr / 10.0))) as f32
+    };
+    let mut vals: Vec<f32> = (0..=40_000).map(|i| i as f32 * 1e-9).collect(); // ρ 0 … 4e-5
+    vals.extend(vals.clone().iter().map(|v| -v));
+    let mut rf = vec![peak];
+    rf.extend(&vals);
+    zero_small_values(&mut rf);
+    for (got, v) in rf[1..].iter().zip(&vals) {
+        assert_eq!(got.to_bits(), formula(*v).to_bits(), "v = {v:e}");
+    }
+    // the cut-off is below the first non-zero factor (ρ = 2.746e-6), with a margin
+    let first_nonzero = vals.iter().find(|v| **v > 0.0 && formula(**v) != 0.0).copied().unwrap_or(0.0);
+    assert!(f64::from(first_nonzero) > 1.1 * ZERO_BELOW, "first non-zero factor at {first_nonzero:e}");
 }
 
 #[test]
