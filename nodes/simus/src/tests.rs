@@ -1,7 +1,7 @@
 //! Unit tests: parameters (serde, MUST aliases, validation), presets, plan, helpers.
 
-use crate::*;
 use crate::simus::ZERO_BELOW;
+use crate::*;
 
 #[test]
 fn probe_loads_from_toml_and_json_with_must_aliases() {
