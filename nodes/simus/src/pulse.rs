@@ -12,6 +12,7 @@
 //!   time of its last sample to pad the maximal distance of the frequency grid.
 
 use std::f64::consts::PI;
+use std::sync::Mutex;
 
 /// Pulse and probe spectra of one probe configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,8 +57,25 @@ impl PulseModel {
     /// Duration (s) of MUST's two-way pulse: `t[-1]` of `getpulse(param, 2)`, i.e. the time of
     /// the last sample of the part of the pulse-echo waveform above 1/1023 of its maximum,
     /// computed on PyMUST's 1-ns grid with the same FFT sizes.
+    ///
+    /// Memoised per process (the last 16 configurations): the 1-ns grid makes it a ~4 ms
+    /// computation, which a Python caller building a new [`crate::Simus`] per call would pay
+    /// every time. A pure function of `(fc, tx_now, bandwidth)`, so the cache returns the same bits.
     pub fn two_way_pulse_duration(&self) -> f64 {
-        two_way_pulse_duration(self)
+        static CACHE: Mutex<Vec<([u64; 3], f64)>> = Mutex::new(Vec::new());
+        let key = [self.fc.to_bits(), self.tx_now.to_bits(), self.bandwidth.to_bits()];
+        // a poisoned lock only means another thread panicked while holding it; the entries it
+        // holds are complete (pushed whole)
+        if let Some(&(_, t)) = CACHE.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(k, _)| *k == key) {
+            return t;
+        }
+        let t = two_way_pulse_duration(self);
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        if cache.len() >= 16 {
+            cache.remove(0);
+        }
+        cache.push((key, t));
+        t
     }
 }
 
@@ -125,6 +143,22 @@ mod tests {
         assert!((t - 1.421e-6).abs() < 0.5e-9, "{t}");
         let t = PulseModel::new(2.72e6, 1.0, 74.0).two_way_pulse_duration();
         assert!((t - 3.637e-6).abs() < 0.5e-9, "{t}");
+    }
+
+    #[test]
+    fn memoised_pulse_duration_is_the_computed_one() {
+        let check = |m: PulseModel| {
+            let direct = two_way_pulse_duration(&m);
+            assert_eq!(m.two_way_pulse_duration().to_bits(), direct.to_bits(), "{m:?}");
+            assert_eq!(m.two_way_pulse_duration().to_bits(), direct.to_bits(), "{m:?} (cached)");
+        };
+        // more configurations than the cache holds, each asked twice, then the first ones again
+        // (evicted by then): every answer is the computed one
+        let models: Vec<PulseModel> = (0..20)
+            .map(|i| PulseModel::new(3e6 + f64::from(i) * 2e5, 1.0 + f64::from(i % 3), 60.0 + f64::from(i)))
+            .collect();
+        models.iter().for_each(|m| check(*m));
+        models[..3].iter().for_each(|m| check(*m));
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! by the same operations in the same order whatever the thread count, so the output bits do not
 //! depend on it.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use num_complex::Complex;
 use rayon::prelude::*;
@@ -436,8 +436,14 @@ impl Simus {
         let n = plan.n_fft;
         let ws = &mut self.ws;
         if ws.fft_len != n || ws.fft.is_none() {
-            let mut planner = RealFftPlanner::<f64>::new();
-            let fft = planner.plan_fft_inverse(n);
+            // one planner per process: plans are reused across Simus instances (a Python caller
+            // builds one per call; planning a length with large prime factors costs milliseconds)
+            static PLANNER: OnceLock<Mutex<RealFftPlanner<f64>>> = OnceLock::new();
+            let fft = PLANNER
+                .get_or_init(|| Mutex::new(RealFftPlanner::new()))
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .plan_fft_inverse(n);
             ws.spec = fft.make_input_vec();
             ws.time = fft.make_output_vec();
             ws.fft_scratch = fft.make_scratch_vec();
