@@ -51,6 +51,9 @@ struct Component {
     dcty: Vec<f64>,
     buf: Vec<f64>,
     buf2: Vec<f64>,
+    /// The inverse `ŷ = IDCT(Γ ∘ DCTy)` at the best GCV point so far of the current search (its
+    /// log10 S in [`Smoothn::yhat_at`]), which the update after the search reuses.
+    yhat: Vec<f64>,
     dct: DctNScratch,
     /// Partial sums of the last pass over this component.
     sums: [f64; 3],
@@ -91,6 +94,8 @@ pub struct Smoothn {
     /// Normalised spacing of every axis, and of the non-singleton axes.
     spacing: Vec<f64>,
     spacing_ns: Vec<f64>,
+    /// log10 S whose `ŷ` every component holds in `yhat` (None: none valid for this iteration).
+    yhat_at: Option<f64>,
 }
 
 /// Smooths `data` (`components × grid`, component-major, each component row-major) in one call.
@@ -125,6 +130,7 @@ impl Smoothn {
                 dcty: vec![0.0; n],
                 buf: vec![0.0; n],
                 buf2: vec![0.0; n],
+                yhat: vec![0.0; n],
                 dct: plan.make_scratch(),
                 sums: [0.0; 3],
             })
@@ -156,6 +162,7 @@ impl Smoothn {
             medians: Vec::new(),
             spacing: Vec::new(),
             spacing_ns: Vec::new(),
+            yhat_at: None,
         })
     }
 
@@ -183,6 +190,7 @@ impl Smoothn {
             .iter()
             .map(|c| {
                 (c.y.capacity() + c.z.capacity() + c.dcty.capacity() + c.buf.capacity() + c.buf2.capacity()) * f
+                    + c.yhat.capacity() * f
                     + c.dct.bytes()
             })
             .sum();
@@ -328,9 +336,16 @@ impl Smoothn {
                     self.set_gamma(s);
                 }
                 let (plan, gamma) = (&self.plan, &self.gamma);
+                // The GCV search just computed ŷ at the chosen S (same Γ bits, same transform):
+                // reuse it instead of transforming again.
+                let reuse = self.yhat_at.take().is_some_and(|p| 10f64.powf(p).to_bits() == s.to_bits());
                 for_each_component(&mut self.comps, |c| {
-                    plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
-                    c.sums = relax(&mut c.z, &c.buf2, rf);
+                    if reuse {
+                        c.sums = relax(&mut c.z, &c.yhat, rf);
+                    } else {
+                        plan.inverse_weighted(&c.dcty, Some(gamma), &mut c.buf2, &mut c.dct);
+                        c.sums = relax(&mut c.z, &c.buf2, rf);
+                    }
                 });
                 let sum = |i: usize| self.comps.iter().map(|c| c.sums[i]).sum::<f64>();
                 // MATLAB: ‖z_old − z‖/‖z‖ (new iterate); PyMUST divides by the old iterate, and in its
@@ -494,6 +509,10 @@ impl Smoothn {
                 self.power.iter_mut().zip(&self.pymust_scale).for_each(|(p, f)| *p *= f);
             }
         }
+        // The best score so far, by fminbnd's own rule (a new point replaces the best when its
+        // score is ≤ the best's; the first point is the best), so that `yhat` ends at its minimum.
+        let mut best_score: Option<f64> = None;
+        self.yhat_at = None;
         let score = |p: f64| -> f64 {
             let s = 10f64.powf(p);
             let power = fast_rss.then_some(self.power.as_slice());
@@ -502,16 +521,27 @@ impl Smoothn {
                 fast
             } else {
                 // Σ over valid points of Wtot (y − ŷ)²; Wtot = 0 (exactly) where data are missing.
+                // ŷ is kept in buf2 (buf: work space of 3-D and higher transforms).
                 let (plan, gamma, wtot) = (&self.plan, &self.gamma, &self.wtot);
                 for_each_component(&mut self.comps, |c| {
-                    c.sums[0] = plan.weighted_rss(&c.dcty, Some(gamma), &c.y, wtot, &mut c.buf2, &mut c.dct);
+                    let (y, work, keep) = (&c.y, &mut c.buf, Some(&mut c.buf2[..]));
+                    c.sums[0] = plan.weighted_rss_keep(&c.dcty, Some(gamma), (y, wtot), work, keep, &mut c.dct);
                 });
                 self.comps.iter().map(|c| c.sums[0]).sum()
             };
             let denom = 1.0 - tr_h / noe;
-            rss / nof / (denom * denom)
+            let score = rss / nof / (denom * denom);
+            if !fast_rss && best_score.is_none_or(|b| score <= b) {
+                best_score = Some(score);
+                self.comps.iter_mut().for_each(|c| std::mem::swap(&mut c.yhat, &mut c.buf2));
+                self.yhat_at = Some(p);
+            }
+            score
         };
         let best = fminbnd(score, bounds[0].log10(), bounds[1].log10(), LOG10_S_TOL);
+        if self.yhat_at.is_some_and(|p| p.to_bits() != best.x.to_bits()) {
+            self.yhat_at = None;
+        }
         (best.x, best.evaluations)
     }
 

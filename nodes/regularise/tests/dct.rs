@@ -103,6 +103,10 @@ fn dctn_matches_naive_and_round_trips_in_1d_2d_3d_4d() {
         vec![1, 1],
         vec![17, 7],
         vec![3, 9, 11],
+        // full blocks of 8 lines (the vectorised column writes), even and odd line lengths
+        vec![24, 16],
+        vec![16, 33],
+        vec![8, 9, 16],
     ] {
         let plan = DctN::new(&shape);
         let len = plan.len();
@@ -133,6 +137,28 @@ fn dctn_matches_naive_and_round_trips_in_1d_2d_3d_4d() {
         plan.inverse_weighted(&y, Some(&w), &mut fused, &mut s);
         plan.inverse(&wy, &mut plain, &mut s);
         assert_eq!(fused, plain, "shape {shape:?}: weighted inverse");
+    }
+}
+
+/// The residual sum that also keeps the inverse writes exactly what `inverse_weighted` returns and
+/// sums exactly what `weighted_rss` sums (the smoother reuses the kept inverse after a GCV search).
+#[test]
+fn weighted_rss_keep_writes_the_inverse_bit_for_bit() {
+    for shape in [vec![37], vec![24, 16], vec![13, 18], vec![16, 33], vec![5, 3, 11], vec![6, 1]] {
+        let plan = DctN::new(&shape);
+        let len = plan.len();
+        let (x, g, y) = (random(len, 1), random(len, 2), random(len, 3));
+        let w: Vec<f64> = random(len, 4).iter().map(|v| v.abs()).collect();
+        let mut s = plan.make_scratch();
+        let (mut inv, mut kept, mut work) = (vec![0.0; len], vec![0.0; len], vec![0.0; len]);
+        plan.inverse_weighted(&x, Some(&g), &mut inv, &mut s);
+        let rss = plan.weighted_rss(&x, Some(&g), &y, &w, &mut work, &mut s);
+        let rss_kept = plan.weighted_rss_keep(&x, Some(&g), (&y, &w), &mut work, Some(&mut kept), &mut s);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&kept), bits(&inv), "shape {shape:?}: kept inverse");
+        assert_eq!(rss_kept.to_bits(), rss.to_bits(), "shape {shape:?}: rss");
+        let direct: f64 = (0..len).map(|i| w[i] * (y[i] - inv[i]) * (y[i] - inv[i])).sum();
+        assert!((rss - direct).abs() <= 1e-12 * direct, "shape {shape:?}: rss {rss} vs {direct}");
     }
 }
 

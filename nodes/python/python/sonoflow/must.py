@@ -509,7 +509,9 @@ def smoothn(y, W=None, S=None, axis=None, TolZ=1e-3, MaxIter=100, Initial=None, 
     if arr.size == 0:
         raise ValueError(f"y: empty array (shape {arr.shape})")
     data = _array(arr, "y", np.float64, allow_nan=True)
-    data = np.where(np.isinf(data), np.nan, data)
+    infinite = np.isinf(data)
+    if infinite.any():
+        data = np.where(infinite, np.nan, data)
     if np.all(np.isnan(data)):
         raise ValueError("y: every value is NaN or infinite; nothing to smooth")
     weights = None

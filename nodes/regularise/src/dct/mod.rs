@@ -17,6 +17,9 @@
 //! The inverse transform takes that layout and returns the spatial (row-major) one. Element-wise
 //! work in the DCT domain is layout-agnostic; [`DctN::spectral_indices`] maps each coefficient to
 //! its per-axis frequency indices.
+//! A full block of [`BLOCK`] lines is written transposed straight from the FFT output, its four
+//! pairs as the lanes of AVX2 vectors (one 64-byte row segment per coefficient); two axes go
+//! through a row-padded intermediate (no in-place pass, no power-of-two row stride).
 //!
 //! A plan ([`DctN`]) is immutable and shareable across threads; each thread brings its own
 //! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
@@ -45,6 +48,8 @@ pub struct LineScratch {
     /// A line of zeros (partner of an odd last line) and a line to discard its output into.
     zeros: Vec<f64>,
     sink: Vec<f64>,
+    /// The real lines of a block, row-major, before they are written transposed.
+    block: Vec<f64>,
 }
 
 impl LineScratch {
@@ -56,12 +61,13 @@ impl LineScratch {
             fft: vec![C64::default(); fft_len],
             zeros: vec![0.0; max_len],
             sink: vec![0.0; max_len],
+            block: vec![0.0; BLOCK * max_len],
         }
     }
 
     fn bytes(&self) -> usize {
         (self.c1.capacity() + self.c2.capacity() + self.fft.capacity()) * std::mem::size_of::<C64>()
-            + (self.zeros.capacity() + self.sink.capacity()) * std::mem::size_of::<f64>()
+            + (self.zeros.capacity() + self.sink.capacity() + self.block.capacity()) * std::mem::size_of::<f64>()
     }
 }
 
@@ -81,42 +87,6 @@ pub struct Dct1d {
     /// Real and imaginary parts of `b`.
     b_re: Vec<f64>,
     b_im: Vec<f64>,
-}
-
-/// Destination of the two real lines of a pair.
-trait PairSink {
-    /// Stores element `k` of line a and of line b.
-    fn put(&mut self, k: usize, a: f64, b: f64);
-}
-
-/// Two adjacent columns of a transposed output: element k at `base + k·stride` (+1 for line b).
-struct Columns<'a> {
-    dst: &'a mut [f64],
-    base: usize,
-    stride: usize,
-}
-
-impl PairSink for Columns<'_> {
-    #[inline(always)]
-    fn put(&mut self, k: usize, a: f64, b: f64) {
-        let i = self.base + k * self.stride;
-        self.dst[i] = a;
-        self.dst[i + 1] = b;
-    }
-}
-
-/// One column (an odd last line; line b is discarded).
-struct Column<'a> {
-    dst: &'a mut [f64],
-    base: usize,
-    stride: usize,
-}
-
-impl PairSink for Column<'_> {
-    #[inline(always)]
-    fn put(&mut self, k: usize, a: f64, _: f64) {
-        self.dst[self.base + k * self.stride] = a;
-    }
 }
 
 impl Dct1d {
@@ -159,48 +129,54 @@ impl Dct1d {
 
     /// Orthonormal DCT-II of `x` into `y` (both of length [`Self::len`]).
     pub fn forward(&self, x: &[f64], y: &mut [f64], s: &mut LineScratch) {
-        self.load(&x[..self.n], None, false, s);
-        self.store_block(&mut y[..self.n], false, s);
+        self.load(&x[..self.n], self.n, 1, None, false, s);
+        self.store_block(&mut y[..self.n], self.n, 1, false, &s.c2, &mut s.sink);
     }
 
     /// Orthonormal DCT-III (inverse of [`Self::forward`]) of `y` into `x`.
     pub fn inverse(&self, y: &[f64], x: &mut [f64], s: &mut LineScratch) {
-        self.load(&y[..self.n], None, true, s);
-        self.store_block(&mut x[..self.n], true, s);
+        self.load(&y[..self.n], self.n, 1, None, true, s);
+        self.store_block(&mut x[..self.n], self.n, 1, true, &s.c2, &mut s.sink);
     }
 
     /// In-place orthonormal DCT-II.
     pub fn forward_in_place(&self, xy: &mut [f64], s: &mut LineScratch) {
-        self.load(&xy[..self.n], None, false, s);
-        self.store_block(&mut xy[..self.n], false, s);
+        self.load(&xy[..self.n], self.n, 1, None, false, s);
+        self.store_block(&mut xy[..self.n], self.n, 1, false, &s.c2, &mut s.sink);
     }
 
     /// In-place orthonormal DCT-III.
     pub fn inverse_in_place(&self, xy: &mut [f64], s: &mut LineScratch) {
-        self.load(&xy[..self.n], None, true, s);
-        self.store_block(&mut xy[..self.n], true, s);
+        self.load(&xy[..self.n], self.n, 1, None, true, s);
+        self.store_block(&mut xy[..self.n], self.n, 1, true, &s.c2, &mut s.sink);
     }
 
-    /// Packs the `src.len()/n ≤ BLOCK` contiguous lines of `src` in pairs (line 2p real, 2p+1
-    /// imaginary part of complex line p; an odd last line pairs with zeros; `weight` multiplies
-    /// element-wise), prepares them and runs the batched FFT. Forward: Makhoul reordering
-    /// `v = [x0, x2, …, x3, x1]`. Inverse: `V_k = b_k (X_k − i X_(n−k))`.
+    /// Packs the `lines ≤ BLOCK` lines of `src` (line l at `l·stride`) in pairs (line 2p real,
+    /// 2p+1 imaginary part of complex line p; an odd last line pairs with zeros; `weight`, laid out
+    /// as `src`, multiplies element-wise), prepares them and runs the batched FFT. Forward: Makhoul
+    /// reordering `v = [x0, x2, …, x3, x1]`. Inverse: `V_k = b_k (X_k − i X_(n−k))`.
     #[inline(always)]
-    fn load(&self, src: &[f64], weight: Option<&[f64]>, inverse: bool, s: &mut LineScratch) {
+    fn load(
+        &self,
+        src: &[f64],
+        stride: usize,
+        lines: usize,
+        weight: Option<&[f64]>,
+        inverse: bool,
+        s: &mut LineScratch,
+    ) {
         let n = self.n;
-        let lines = src.len() / n;
         let pairs = lines.div_ceil(2);
         let LineScratch { c1, c2, fft, zeros, .. } = s;
         let zeros = &zeros[..n];
-        fn pick<'a>(buf: &'a [f64], l: usize, lines: usize, zeros: &'a [f64]) -> &'a [f64] {
-            let n = zeros.len();
+        fn pick<'a>(buf: &'a [f64], l: usize, (lines, stride): (usize, usize), zeros: &'a [f64]) -> &'a [f64] {
             if l < lines {
-                &buf[l * n..(l + 1) * n]
+                &buf[l * stride..][..zeros.len()]
             } else {
                 zeros
             }
         }
-        let line = |buf, l| pick(buf, l, lines, zeros);
+        let line = |buf, l| pick(buf, l, (lines, stride), zeros);
         for (p, v) in c1.chunks_exact_mut(n).take(pairs).enumerate() {
             let (xa, xb) = (line(src, 2 * p), line(src, 2 * p + 1));
             match (inverse, weight) {
@@ -218,7 +194,14 @@ impl Dct1d {
     fn pack_forward(&self, v: &mut [C64], xa: &[f64], xb: &[f64]) {
         let n = self.n;
         let (v, xa, xb) = (&mut v[..n], &xa[..n], &xb[..n]);
-        for q in 0..n / 2 {
+        #[allow(unused_mut)]
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: AVX2 is available.
+            done = unsafe { simd::pack_forward(v, xa, xb) };
+        }
+        for q in done..n / 2 {
             v[q] = C64::new(xa[2 * q], xb[2 * q]);
             v[n - 1 - q] = C64::new(xa[2 * q + 1], xb[2 * q + 1]);
         }
@@ -285,114 +268,62 @@ impl Dct1d {
         }
     }
 
-    /// DCT-II coefficients of the pair spectrum `v` into lines `ya` (real part) and `yb`:
-    /// `X_k = P + Q`, `X_(n−k) = i (P − Q)` with `P = a_k V_k`, `Q = conj(a_k) V_(n−k)`.
+    /// Transforms the `lines` rows (length n, row stride `src_stride`; `weight` laid out as `src`)
+    /// of `src` into `dst`, with row stride `dst_stride`: row-major, or transposed (n rows, line l
+    /// in column l).
     #[inline(always)]
-    fn unpack_forward(&self, v: &[C64], out: &mut impl PairSink) {
-        let n = self.n;
-        let (v, a) = (&v[..n], &self.a[..n]);
-        let x0 = v[0] * (2.0 * a[0].re);
-        out.put(0, x0.re, x0.im);
-        for k in 1..n.div_ceil(2) {
-            let (pk, qk) = (a[k] * v[k], a[k].conj() * v[n - k]);
-            let (sum, d) = (pk + qk, pk - qk);
-            out.put(k, sum.re, sum.im);
-            out.put(n - k, -d.im, d.re);
-        }
-        if n & 1 == 0 {
-            let h = n / 2;
-            let xh = v[h] * (2.0 * a[h].re);
-            out.put(h, xh.re, xh.im);
-        }
-    }
-
-    /// Samples of the pair from the inverse FFT output `v`: `x_2q = v_q`, `x_2q+1 = v_(n−1−q)`.
-    #[inline(always)]
-    fn unpack_inverse(&self, v: &[C64], out: &mut impl PairSink) {
-        let n = self.n;
-        let v = &v[..n];
-        for q in 0..n / 2 {
-            let (e, o) = (v[q], v[n - 1 - q]);
-            out.put(2 * q, e.re, e.im);
-            out.put(2 * q + 1, o.re, o.im);
-        }
-        if n & 1 == 1 {
-            let e = v[n / 2];
-            out.put(n - 1, e.re, e.im);
-        }
-    }
-
-    /// Transforms the rows (length n) of `src` into `dst`: row-major, or transposed (n × rows; the
-    /// two lines of a pair land side by side in each output row).
-    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn rows(
         &self,
-        src: &[f64],
+        (src, src_stride, lines): (&[f64], usize, usize),
         weight: Option<&[f64]>,
-        dst: &mut [f64],
+        (dst, dst_stride): (&mut [f64], usize),
         inverse: bool,
         transpose: bool,
         s: &mut LineScratch,
     ) {
         let n = self.n;
-        let rows = src.len() / n;
-        for (b, lines) in src.chunks(BLOCK * n).enumerate() {
-            let r0 = b * BLOCK;
-            let nb = lines.len() / n;
-            self.load(lines, weight.map(|w| &w[r0 * n..(r0 + nb) * n]), inverse, s);
+        for r0 in (0..lines).step_by(BLOCK) {
+            let nb = (lines - r0).min(BLOCK);
+            self.load(&src[r0 * src_stride..], src_stride, nb, weight.map(|w| &w[r0 * src_stride..]), inverse, s);
+            let LineScratch { c2, sink, block, .. } = s;
             if !transpose {
-                self.store_block(&mut dst[r0 * n..(r0 + nb) * n], inverse, s);
+                self.store_block(&mut dst[r0 * dst_stride..], dst_stride, nb, inverse, c2, sink);
                 continue;
             }
-            if inverse && nb.is_multiple_of(2) {
-                self.unpack_inverse_columns(&s.c2[..nb / 2 * n], dst, r0, rows);
-                continue;
-            }
-            for (p, v) in s.c2.chunks_exact(n).take(nb.div_ceil(2)).enumerate() {
-                let r = r0 + 2 * p;
-                let dst = &mut dst[..];
-                match (r + 1 < r0 + nb, inverse) {
-                    (true, false) => self.unpack_forward(v, &mut Columns { dst, base: r, stride: rows }),
-                    (true, true) => self.unpack_inverse(v, &mut Columns { dst, base: r, stride: rows }),
-                    (false, false) => self.unpack_forward(v, &mut Column { dst, base: r, stride: rows }),
-                    (false, true) => self.unpack_inverse(v, &mut Column { dst, base: r, stride: rows }),
+            #[cfg(target_arch = "x86_64")]
+            if nb == BLOCK && simd::available() {
+                // A full block straight into its 8 columns, the 4 pairs as lanes.
+                let c = &c2[..BLOCK / 2 * n];
+                // SAFETY: AVX2 is available.
+                unsafe {
+                    if inverse {
+                        simd::unpack_inverse_columns(c, n, dst, (r0, dst_stride));
+                    } else {
+                        simd::unpack_forward_columns(c, n, (&self.a_re, &self.a_im), dst, (r0, dst_stride));
+                    }
                 }
+                continue;
             }
+            // Unpack into an L1-resident row-major block, then write it as columns r0 … r0 + nb.
+            let block = &mut block[..nb * n];
+            self.store_block(block, n, nb, inverse, c2, sink);
+            transpose_block(block, nb, n, dst, r0, dst_stride);
         }
     }
 
-    /// [`Self::unpack_inverse`] of every pair of a block (`c`: pairs × n) into adjacent columns
-    /// `r0 …` of `dst` (row stride `rows`): output row j receives the block's samples j, one cache
-    /// line for a full block.
+    /// Writes the `lines` lines of the last load into `out` (line l at `l·stride`); the partner of
+    /// an odd last line goes to scratch.
     #[inline(always)]
-    fn unpack_inverse_columns(&self, c: &[C64], dst: &mut [f64], r0: usize, rows: usize) {
+    fn store_block(&self, out: &mut [f64], stride: usize, lines: usize, inverse: bool, c2: &[C64], sink: &mut [f64]) {
         let n = self.n;
-        let width = 2 * (c.len() / n);
-        let put = |dst: &mut [f64], j: usize, q: usize| {
-            let d = &mut dst[j * rows + r0..][..width];
-            for (p, d) in d.chunks_exact_mut(2).enumerate() {
-                let v = c[p * n + q];
-                (d[0], d[1]) = (v.re, v.im);
-            }
-        };
-        for q in 0..n / 2 {
-            put(dst, 2 * q, q);
-            put(dst, 2 * q + 1, n - 1 - q);
-        }
-        if n & 1 == 1 {
-            put(dst, n - 1, n / 2);
-        }
-    }
-
-    /// Writes the lines of the last load (`out.len()/n` of them) into `out`, row-major; the partner
-    /// of an odd last line goes to scratch.
-    #[inline(always)]
-    fn store_block(&self, out: &mut [f64], inverse: bool, s: &mut LineScratch) {
-        let n = self.n;
-        let LineScratch { c2, sink, .. } = s;
-        for (pair, v) in out.chunks_mut(2 * n).zip(c2.chunks_exact(n)) {
-            let (a, b) = pair.split_at_mut(n);
-            let b = if b.is_empty() { &mut sink[..n] } else { b };
+        for (p, v) in c2.chunks_exact(n).take(lines.div_ceil(2)).enumerate() {
+            let (a, b) = if 2 * p + 1 < lines {
+                let (a, b) = out[2 * p * stride..].split_at_mut(stride);
+                (&mut a[..n], &mut b[..n])
+            } else {
+                (&mut out[2 * p * stride..][..n], &mut sink[..n])
+            };
             if inverse {
                 self.unpack_inverse_rows(v, a, b);
             } else {
@@ -401,7 +332,9 @@ impl Dct1d {
         }
     }
 
-    /// [`Self::unpack_forward`] into two row-major lines (index loops over equal-length slices).
+    /// DCT-II coefficients of the pair spectrum `v` into lines `ya` (real part) and `yb`:
+    /// `X_k = P + Q`, `X_(n−k) = i (P − Q)` with `P = a_k V_k`, `Q = conj(a_k) V_(n−k)`, and
+    /// `X_0 = 2 Re(a_0) V_0`, `X_(n/2) = 2 Re(a_(n/2)) V_(n/2)` (AVX2 body in blocks of four k).
     #[inline(always)]
     fn unpack_forward_rows(&self, v: &[C64], ya: &mut [f64], yb: &mut [f64]) {
         let n = self.n;
@@ -419,7 +352,14 @@ impl Dct1d {
         let (yal, yah) = ya[1..].split_at_mut(n - 1 - m);
         let (ybl, ybh) = yb[1..].split_at_mut(n - 1 - m);
         let (yal, yah, ybl, ybh) = (&mut yal[..m], &mut yah[..m], &mut ybl[..m], &mut ybh[..m]);
-        for j in 0..m {
+        #[allow(unused_mut)]
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: AVX2 is available.
+            done = unsafe { simd::unpack_forward(vl, vh, [al, ar], [&mut *yal, &mut *ybl], [&mut *yah, &mut *ybh]) };
+        }
+        for j in done..m {
             let r = m - 1 - j;
             let (p, q) = (vl[j], vh[r]);
             // P = a V_k, Q = conj(a) V_(n−k); X_k = P + Q, X_(n−k) = i (P − Q).
@@ -430,7 +370,8 @@ impl Dct1d {
         }
     }
 
-    /// [`Self::unpack_inverse`] into two row-major lines.
+    /// Samples of the pair from the inverse FFT output `v` into two row-major lines:
+    /// `x_2q = v_q`, `x_2q+1 = v_(n−1−q)`.
     #[inline(always)]
     fn unpack_inverse_rows(&self, v: &[C64], xa: &mut [f64], xb: &mut [f64]) {
         let n = self.n;
@@ -438,7 +379,14 @@ impl Dct1d {
         let (lo, hi) = v[..n].split_at(n - h);
         let hi = &hi[..h];
         let (xa, xb) = (&mut xa[..n], &mut xb[..n]);
-        for q in 0..h {
+        #[allow(unused_mut)]
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: AVX2 is available.
+            done = unsafe { simd::unpack_inverse_rows(lo, hi, xa, xb) };
+        }
+        for q in done..h {
             let (e, o) = (lo[q], hi[h - 1 - q]);
             (xa[2 * q], xb[2 * q]) = (e.re, e.im);
             (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
@@ -448,16 +396,26 @@ impl Dct1d {
         }
     }
 
-    /// Inverse-transforms the rows of `src` (times `weight`) and returns `Σ w (y − x)²` against the
-    /// rows of `y` with weights `w`, without storing the samples.
+    /// Inverse-transforms the `lines` rows of `src` (row stride `stride`; times `weight`, laid out
+    /// as `src`) and returns `Σ w (y − x)²` against the rows of `y` with weights `w` (row-major,
+    /// length n); the samples are also written to `keep` (row-major) when given.
     #[inline(always)]
-    fn rows_rss(&self, src: &[f64], weight: Option<&[f64]>, y: &[f64], w: &[f64], s: &mut LineScratch) -> f64 {
+    fn rows_rss(
+        &self,
+        (src, stride, lines): (&[f64], usize, usize),
+        weight: Option<&[f64]>,
+        (y, w): (&[f64], &[f64]),
+        mut keep: Option<&mut [f64]>,
+        s: &mut LineScratch,
+    ) -> f64 {
         let n = self.n;
         let mut total = 0.0;
-        for (b, lines) in src.chunks(BLOCK * n).enumerate() {
-            let r0 = b * BLOCK;
-            let nb = lines.len() / n;
-            self.load(lines, weight.map(|w| &w[r0 * n..(r0 + nb) * n]), true, s);
+        for r0 in (0..lines).step_by(BLOCK) {
+            let nb = (lines - r0).min(BLOCK);
+            self.load(&src[r0 * stride..], stride, nb, weight.map(|w| &w[r0 * stride..]), true, s);
+            if let Some(out) = keep.as_deref_mut() {
+                self.store_block(&mut out[r0 * n..], n, nb, true, &s.c2, &mut s.sink);
+            }
             for (p, v) in s.c2.chunks_exact(n).take(nb.div_ceil(2)).enumerate() {
                 let (ra, pair) = (r0 + 2 * p, (nb - 2 * p).min(2));
                 let rb = if pair == 2 { ra + 1 } else { ra };
@@ -548,9 +506,32 @@ impl Dct1d {
     /// Transforms the rows of `data` in place.
     #[inline(always)]
     fn rows_in_place(&self, data: &mut [f64], inverse: bool, s: &mut LineScratch) {
-        for lines in data.chunks_mut(BLOCK * self.n) {
-            self.load(lines, None, inverse, s);
-            self.store_block(lines, inverse, s);
+        let n = self.n;
+        for lines in data.chunks_mut(BLOCK * n) {
+            let nb = lines.len() / n;
+            self.load(lines, n, nb, None, inverse, s);
+            self.store_block(lines, n, nb, inverse, &s.c2, &mut s.sink);
+        }
+    }
+}
+
+/// Writes the `lines` rows of `block` (row-major, length n) as columns `c0 …` of `dst` (row
+/// stride `stride`): `dst[k·stride + c0 + l] = block[l·n + k]`.
+#[inline(always)]
+fn transpose_block(block: &[f64], lines: usize, n: usize, dst: &mut [f64], c0: usize, stride: usize) {
+    #[allow(unused_mut)]
+    let (mut kb, mut lb) = (0, 0);
+    #[cfg(target_arch = "x86_64")]
+    if simd::available() {
+        // SAFETY: AVX2 is available.
+        (kb, lb) = unsafe { simd::transpose_block(block, lines, n, dst, c0, stride) };
+    }
+    for k in 0..n {
+        // Tiles cover rows k < kb and lines l < lb; finish the rest.
+        let l_start = if k < kb { lb } else { 0 };
+        let d = &mut dst[k * stride + c0..][..lines];
+        for (l, d) in d.iter_mut().enumerate().skip(l_start) {
+            *d = block[l * n + k];
         }
     }
 }

@@ -1,12 +1,18 @@
 //! The N-D plan: 1-D transforms along every non-singleton axis with axis rotation (see the
 //! parent module for the layouts).
 
+use std::sync::{Mutex, OnceLock};
+
 use rustfft::FftPlanner;
 
 use super::{Dct1d, LineScratch};
 
 /// Tile edge of the cache-blocked transpose.
 const TILE: usize = 16;
+
+/// Padding (in f64) of the rows of the intermediate array of a 2-D transform: a power-of-two row
+/// length would map the column writes of the first pass onto a few cache sets.
+const PAD: usize = 8;
 
 /// Plan of an orthonormal N-D DCT-II / DCT-III for one row-major shape.
 pub struct DctN {
@@ -36,7 +42,13 @@ impl DctN {
     /// length 1 are skipped (the DCT of one sample is the identity). Zero-length axes give an
     /// empty plan.
     pub fn new(shape: &[usize]) -> Self {
-        let mut planner = FftPlanner::new();
+        // One FFT planner per process: it keeps the plans of every length it has made, so a new
+        // plan for a shape seen before (a Python call, a new workspace) re-plans nothing.
+        static PLANNER: OnceLock<Mutex<FftPlanner<f64>>> = OnceLock::new();
+        let mut planner = PLANNER
+            .get_or_init(|| Mutex::new(FftPlanner::new()))
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let len = shape.iter().product();
         let axes: Vec<usize> = if len == 0 { Vec::new() } else { (0..shape.len()).filter(|&a| shape[a] > 1).collect() };
         let plans = axes.iter().map(|&a| Dct1d::with_planner(shape[a], &mut planner)).collect();
@@ -89,7 +101,14 @@ impl DctN {
     pub fn make_scratch(&self) -> DctNScratch {
         let max_n = self.plans.iter().map(Dct1d::len).max().unwrap_or(1);
         let fft = self.plans.iter().map(Dct1d::fft_scratch_len).max().unwrap_or(0);
-        let tmp_len = if self.plans.len() >= 3 { self.len } else { 0 };
+        let tmp_len = match self.plans.len() {
+            2 => {
+                let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
+                (n1 * (n0 + PAD)).max(n0 * (n1 + PAD))
+            }
+            k if k >= 3 => self.len,
+            _ => 0,
+        };
         DctNScratch { line: LineScratch::new(max_n, fft), tmp: vec![0.0; tmp_len] }
     }
 
@@ -122,19 +141,29 @@ impl DctN {
             output.copy_from_slice(input);
             return;
         }
+        let len = self.len;
         if k == 1 {
-            self.plans[0].rows(input, None, output, false, false, line);
+            let n = self.plans[0].len();
+            self.plans[0].rows((input, n, len / n), None, (output, n), false, false, line);
+            return;
+        }
+        if k == 2 {
+            // Along a1 into the padded (a1, a0) intermediate, then along a0 into `output`.
+            let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
+            self.plans[1].rows((input, n1, n0), None, (&mut tmp[..], n0 + PAD), false, true, line);
+            self.plans[0].rows((&tmp[..], n0 + PAD, n1), None, (output, n0), false, false, line);
             return;
         }
         // Step t transforms axis K-1-t (the current last axis) and rotates it to the front.
         for t in 0..k - 1 {
             let plan = &self.plans[k - 1 - t];
-            let to_output = (k - 2 - t) & 1 == 0;
+            let (n, to_output) = (plan.len(), (k - 2 - t) & 1 == 0);
+            let lines = len / n;
             match (t, to_output) {
-                (0, true) => plan.rows(input, None, output, false, true, line),
-                (0, false) => plan.rows(input, None, tmp, false, true, line),
-                (_, true) => plan.rows(tmp, None, output, false, true, line),
-                (_, false) => plan.rows(output, None, tmp, false, true, line),
+                (0, true) => plan.rows((input, n, lines), None, (output, lines), false, true, line),
+                (0, false) => plan.rows((input, n, lines), None, (tmp, lines), false, true, line),
+                (_, true) => plan.rows((tmp, n, lines), None, (output, lines), false, true, line),
+                (_, false) => plan.rows((output, n, lines), None, (tmp, lines), false, true, line),
             }
         }
         self.plans[0].rows_in_place(output, false, line);
@@ -178,7 +207,15 @@ impl DctN {
                     *o = weight.map_or(*x, |w| w[i] * x);
                 }
             }
-            1 => self.plans[0].rows(input, weight, output, true, false, &mut s.line),
+            1 => {
+                let n = self.plans[0].len();
+                self.plans[0].rows((input, n, self.len / n), weight, (output, n), true, false, &mut s.line);
+            }
+            2 => {
+                let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
+                self.plans[0].rows((input, n0, n1), weight, (&mut s.tmp[..], n1 + PAD), true, true, &mut s.line);
+                self.plans[1].rows((&s.tmp[..], n1 + PAD, n0), None, (output, n1), true, false, &mut s.line);
+            }
             k => {
                 self.inverse_all_but_last(input, weight, output, s);
                 self.plans[k - 1].rows_in_place(output, true, &mut s.line);
@@ -200,17 +237,35 @@ impl DctN {
         work: &mut [f64],
         s: &mut DctNScratch,
     ) -> f64 {
+        self.weighted_rss_keep(input, weight, (y, w), work, None, s)
+    }
+
+    /// [`Self::weighted_rss`] that also writes the inverse `x` to `keep` (the same bits as
+    /// [`Self::inverse_weighted`]) when given; `keep` and `work` are distinct grid-sized buffers.
+    ///
+    /// # Panics
+    /// If a slice length differs from [`Self::len`] or the scratch belongs to another plan.
+    pub fn weighted_rss_keep(
+        &self,
+        input: &[f64],
+        weight: Option<&[f64]>,
+        (y, w): (&[f64], &[f64]),
+        work: &mut [f64],
+        keep: Option<&mut [f64]>,
+        s: &mut DctNScratch,
+    ) -> f64 {
         assert!(
             [input.len(), y.len(), w.len(), work.len()].iter().all(|l| *l == self.len),
             "DctN::weighted_rss: length"
         );
         assert!(weight.is_none_or(|g| g.len() == self.len), "DctN::weighted_rss: wrong weight length");
+        assert!(keep.as_ref().is_none_or(|k| k.len() == self.len), "DctN::weighted_rss: wrong keep length");
         #[cfg(target_arch = "x86_64")]
         if avx2() {
             // SAFETY: the CPU supports AVX2 (checked at run time).
-            return unsafe { self.rss_avx2(input, weight, y, w, work, s) };
+            return unsafe { self.rss_avx2(input, weight, (y, w), work, keep, s) };
         }
-        self.rss_body(input, weight, y, w, work, s)
+        self.rss_body(input, weight, (y, w), work, keep, s)
     }
 
     /// [`Self::weighted_rss`] compiled for AVX2 (same operations, so the same bits).
@@ -220,12 +275,12 @@ impl DctN {
         &self,
         input: &[f64],
         weight: Option<&[f64]>,
-        y: &[f64],
-        w: &[f64],
+        yw: (&[f64], &[f64]),
         work: &mut [f64],
+        keep: Option<&mut [f64]>,
         s: &mut DctNScratch,
     ) -> f64 {
-        self.rss_body(input, weight, y, w, work, s)
+        self.rss_body(input, weight, yw, work, keep, s)
     }
 
     #[inline(always)]
@@ -233,17 +288,32 @@ impl DctN {
         &self,
         input: &[f64],
         weight: Option<&[f64]>,
-        y: &[f64],
-        w: &[f64],
+        (y, w): (&[f64], &[f64]),
         work: &mut [f64],
+        keep: Option<&mut [f64]>,
         s: &mut DctNScratch,
     ) -> f64 {
         match self.plans.len() {
-            0 => (0..self.len).map(|i| w[i] * (y[i] - weight.map_or(input[i], |g| g[i] * input[i])).powi(2)).sum(),
-            1 => self.plans[0].rows_rss(input, weight, y, w, &mut s.line),
+            0 => {
+                let x = |i: usize| weight.map_or(input[i], |g| g[i] * input[i]);
+                if let Some(keep) = keep {
+                    keep.iter_mut().enumerate().for_each(|(i, k)| *k = x(i));
+                }
+                (0..self.len).map(|i| w[i] * (y[i] - x(i)).powi(2)).sum()
+            }
+            1 => {
+                let n = self.plans[0].len();
+                self.plans[0].rows_rss((input, n, self.len / n), weight, (y, w), keep, &mut s.line)
+            }
+            2 => {
+                let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
+                self.plans[0].rows((input, n0, n1), weight, (&mut s.tmp[..], n1 + PAD), true, true, &mut s.line);
+                self.plans[1].rows_rss((&s.tmp[..], n1 + PAD, n0), None, (y, w), keep, &mut s.line)
+            }
             k => {
                 self.inverse_all_but_last(input, weight, work, s);
-                self.plans[k - 1].rows_rss(work, None, y, w, &mut s.line)
+                let n = self.plans[k - 1].len();
+                self.plans[k - 1].rows_rss((work, n, self.len / n), None, (y, w), keep, &mut s.line)
             }
         }
     }
@@ -254,18 +324,15 @@ impl DctN {
     fn inverse_all_but_last(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
         let DctNScratch { line, tmp } = s;
-        if k == 2 {
-            // Layout (a1, a0): invert along a0 writing (a0, a1).
-            self.plans[0].rows(input, weight, output, true, true, line);
-            return;
-        }
-        // Layout rotL^(t+1)(a): invert the last axis a_t, then move the first axis to the end.
+        // Layout rotL^(t+1)(a): invert the last axis a_t, then move the first axis to the end (K ≥ 3;
+        // two axes take the padded path of the callers).
         for t in 0..k - 1 {
             let plan = &self.plans[t];
+            let (n, lines) = (plan.len(), self.len / plan.len());
             if t == 0 {
-                plan.rows(input, weight, tmp, true, false, line);
+                plan.rows((input, n, lines), weight, (tmp, n), true, false, line);
             } else {
-                plan.rows(output, None, tmp, true, false, line);
+                plan.rows((output, n, lines), None, (tmp, n), true, false, line);
             }
             let first = self.plans[t + 1].len();
             transpose(tmp, output, first, self.len / first);

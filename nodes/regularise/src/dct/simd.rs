@@ -136,3 +136,256 @@ pub(super) unsafe fn rss_pair(lo: &[C64], hi: &[C64], y: [&[f64]; 2], w: [&[f64]
     }
     (body, [e, o])
 }
+
+/// Four consecutive complex numbers at `p` as (real parts, imaginary parts), lanes in order.
+///
+/// # Safety
+/// The CPU must support AVX2; `p` must point to 8 readable f64.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn load_complex(p: *const f64) -> (__m256d, __m256d) {
+    // SAFETY: the caller guarantees 8 readable f64 at p.
+    let (a, b) = unsafe { (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4))) };
+    // unpack: (c0, c2, c1, c3) per part; permute (0, 2, 1, 3) puts them in order.
+    (_mm256_permute4x64_pd::<0xD8>(_mm256_unpacklo_pd(a, b)), _mm256_permute4x64_pd::<0xD8>(_mm256_unpackhi_pd(a, b)))
+}
+
+/// Body of `Dct1d::pack_forward` in blocks of two q: `v[q] = (xa[2q], xb[2q])`,
+/// `v[n − 1 − q] = (xa[2q + 1], xb[2q + 1])` (moves only). `v` has length n ≤ `xa.len()`,
+/// `xb.len()`; returns the q done (a multiple of 2, at most n/2).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn pack_forward(v: &mut [C64], xa: &[f64], xb: &[f64]) -> usize {
+    let n = v.len();
+    assert!(xa.len() >= n && xb.len() >= n);
+    let body = n / 2 / 2 * 2;
+    let mut q0 = 0;
+    while q0 < body {
+        // SAFETY: 2q0 + 4 ≤ 2·body ≤ n; q0 + 2 ≤ n/2 and n − 2 − q0 + 2 ≤ n (lengths asserted above).
+        unsafe {
+            let a = _mm256_loadu_pd(xa.as_ptr().add(2 * q0));
+            let b = _mm256_loadu_pd(xb.as_ptr().add(2 * q0));
+            let even = _mm256_unpacklo_pd(a, b); // a0 b0 a2 b2: v[q0], v[q0 + 1]
+            let odd = _mm256_unpackhi_pd(a, b); // a1 b1 a3 b3: v[n − 1 − q0], v[n − 2 − q0]
+            _mm256_storeu_pd(v.as_mut_ptr().add(q0).cast::<f64>(), even);
+            _mm256_storeu_pd(v.as_mut_ptr().add(n - 2 - q0).cast::<f64>(), _mm256_permute2f128_pd::<0x01>(odd, odd));
+        }
+        q0 += 2;
+    }
+    body
+}
+
+/// Body of `Dct1d::unpack_inverse_rows` in blocks of two q: `xa[2q] = lo[q].re`,
+/// `xb[2q] = lo[q].im`, `xa[2q + 1] = hi[h − 1 − q].re`, `xb[2q + 1] = hi[h − 1 − q].im` with
+/// h = `hi.len()` ≤ `lo.len()` (moves only). Returns the q done (a multiple of 2).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn unpack_inverse_rows(lo: &[C64], hi: &[C64], xa: &mut [f64], xb: &mut [f64]) -> usize {
+    let h = hi.len();
+    assert!(lo.len() >= h && xa.len() >= 2 * h && xb.len() >= 2 * h);
+    let body = h / 2 * 2;
+    let mut q0 = 0;
+    while q0 < body {
+        // SAFETY: q0 + 2 ≤ h ≤ lo.len(), h − 2 − q0 ≥ 0, 2q0 + 4 ≤ 2h (lengths asserted above).
+        unsafe {
+            let e = _mm256_loadu_pd(lo.as_ptr().add(q0).cast::<f64>());
+            let o = _mm256_loadu_pd(hi.as_ptr().add(h - 2 - q0).cast::<f64>());
+            let o = _mm256_permute2f128_pd::<0x01>(o, o);
+            _mm256_storeu_pd(xa.as_mut_ptr().add(2 * q0), _mm256_unpacklo_pd(e, o));
+            _mm256_storeu_pd(xb.as_mut_ptr().add(2 * q0), _mm256_unpackhi_pd(e, o));
+        }
+        q0 += 2;
+    }
+    body
+}
+
+/// Body of `Dct1d::unpack_forward_rows` over the pairs (k, n − k) in blocks of four: for block
+/// j0 and `r0 = m − 4 − j0`, with `P = a V_k`, `Q = conj(a) V_(n−k)` (`V_k = vl[j]`,
+/// `V_(n−k) = vh[m − 1 − j]`, `a = (ar[j], ai[j])`): `yl = (P + Q)` (lines a, b as real and
+/// imaginary parts) and `yh[m − 1 − j] = (−(P.im − Q.im), P.re − Q.re)`. The same IEEE operations
+/// in the same order as the scalar loop. Every slice has length m = `vl.len()`; returns the pairs
+/// done (a multiple of 4).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn unpack_forward(
+    vl: &[C64],
+    vh: &[C64],
+    a: [&[f64]; 2],
+    yl: [&mut [f64]; 2],
+    yh: [&mut [f64]; 2],
+) -> usize {
+    let m = vl.len();
+    assert!(vh.len() == m && a.iter().all(|s| s.len() == m));
+    assert!(yl.iter().chain(&yh).all(|s| s.len() == m));
+    let [yal, ybl] = yl;
+    let [yah, ybh] = yh;
+    let body = m / 4 * 4;
+    let sign = _mm256_set1_pd(-0.0);
+    let mut j0 = 0;
+    while j0 < body {
+        let r0 = m - 4 - j0;
+        // SAFETY: j0 + 4 ≤ m and r0 + 4 ≤ m, so every access is in bounds (lengths asserted above);
+        // vl and vh hold m complex numbers (2m f64, repr(C)).
+        unsafe {
+            let (p_re, p_im) = load_complex(vl.as_ptr().add(j0).cast::<f64>());
+            let (q_re, q_im) = load_complex(vh.as_ptr().add(r0).cast::<f64>());
+            let (q_re, q_im) = (rev(q_re), rev(q_im));
+            let (al, ar) = (_mm256_loadu_pd(a[0].as_ptr().add(j0)), _mm256_loadu_pd(a[1].as_ptr().add(j0)));
+            let pr = _mm256_sub_pd(_mm256_mul_pd(al, p_re), _mm256_mul_pd(ar, p_im));
+            let pi = _mm256_add_pd(_mm256_mul_pd(al, p_im), _mm256_mul_pd(ar, p_re));
+            let qr = _mm256_add_pd(_mm256_mul_pd(al, q_re), _mm256_mul_pd(ar, q_im));
+            let qi = _mm256_sub_pd(_mm256_mul_pd(al, q_im), _mm256_mul_pd(ar, q_re));
+            _mm256_storeu_pd(yal.as_mut_ptr().add(j0), _mm256_add_pd(pr, qr));
+            _mm256_storeu_pd(ybl.as_mut_ptr().add(j0), _mm256_add_pd(pi, qi));
+            let neg = _mm256_xor_pd(_mm256_sub_pd(pi, qi), sign);
+            _mm256_storeu_pd(yah.as_mut_ptr().add(r0), rev(neg));
+            _mm256_storeu_pd(ybh.as_mut_ptr().add(r0), rev(_mm256_sub_pd(pr, qr)));
+        }
+        j0 += 4;
+    }
+    body
+}
+
+/// Writes the `lines` rows of `block` (row-major, length n each) as columns `c0 … c0 + lines` of
+/// `dst` (row stride `stride`): `dst[k·stride + c0 + l] = block[l·n + k]`, in 4 × 4 tiles
+/// (moves only). Returns the rows of `dst` done (a multiple of 4; the caller finishes the rest)
+/// and the lines covered (a multiple of 4).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn transpose_block(
+    block: &[f64],
+    lines: usize,
+    n: usize,
+    dst: &mut [f64],
+    c0: usize,
+    stride: usize,
+) -> (usize, usize) {
+    assert!(block.len() >= lines * n);
+    let (kb, lb) = (n / 4 * 4, lines / 4 * 4);
+    if kb > 0 && lb > 0 {
+        assert!(c0 + lb <= stride && (kb - 1) * stride + c0 + lb <= dst.len());
+    }
+    // Line-tiles inner: a row of dst (one cache line for 8 lines) is finished before the next.
+    let mut k0 = 0;
+    while k0 < kb {
+        for l0 in (0..lb).step_by(4) {
+            // SAFETY: rows l0 … l0 + 3 < lines and columns k0 … k0 + 3 < n of block; rows
+            // k0 … k0 + 3 < kb and columns c0 + l0 … + 3 < c0 + lb ≤ stride of dst (asserted above).
+            unsafe {
+                let r = |i: usize| _mm256_loadu_pd(block.as_ptr().add((l0 + i) * n + k0));
+                let (r0, r1, r2, r3) = (r(0), r(1), r(2), r(3));
+                let (t0, t1) = (_mm256_unpacklo_pd(r0, r1), _mm256_unpackhi_pd(r0, r1));
+                let (t2, t3) = (_mm256_unpacklo_pd(r2, r3), _mm256_unpackhi_pd(r2, r3));
+                let d = dst.as_mut_ptr().add(k0 * stride + c0 + l0);
+                _mm256_storeu_pd(d, _mm256_permute2f128_pd::<0x20>(t0, t2));
+                _mm256_storeu_pd(d.add(stride), _mm256_permute2f128_pd::<0x20>(t1, t3));
+                _mm256_storeu_pd(d.add(2 * stride), _mm256_permute2f128_pd::<0x31>(t0, t2));
+                _mm256_storeu_pd(d.add(3 * stride), _mm256_permute2f128_pd::<0x31>(t1, t3));
+            }
+        }
+        k0 += 4;
+    }
+    (kb, lb)
+}
+
+/// Complex element `k` of pairs 0, 1 and of pairs 2, 3 of a block (`c`: 4 pairs × n).
+///
+/// # Safety
+/// The CPU must support AVX2; `3n + k < c.len()`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn pairs_at(c: &[C64], n: usize, k: usize) -> (__m256d, __m256d) {
+    // SAFETY: the caller guarantees 3n + k < c.len(); each read is one complex (2 f64).
+    unsafe {
+        let p = |i: usize| c.as_ptr().add(i * n + k).cast::<f64>();
+        (_mm256_loadu2_m128d(p(1), p(0)), _mm256_loadu2_m128d(p(3), p(2)))
+    }
+}
+
+/// A full block (4 pairs, 8 lines) of `Dct1d::unpack_forward_rows` written transposed, the pairs
+/// as lanes: row k of `dst` (stride `stride`) receives `X_k` of lines `c0 … c0 + 8` (line a, b of
+/// pair p as the real and imaginary part of `P + Q`), row n − k receives `(−(P − Q).im, (P − Q).re)`,
+/// with `P = a_k V_k`, `Q = conj(a_k) V_(n−k)`; rows 0 and n/2 (even n) are `V · 2 Re a`. The
+/// same IEEE operations as the scalar formulas (`vaddsubpd` computes `x − y` in even and `x + y`
+/// in odd lanes; `−ar·im` is exact).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn unpack_forward_columns(
+    c: &[C64],
+    n: usize,
+    (a_re, a_im): (&[f64], &[f64]),
+    dst: &mut [f64],
+    (c0, stride): (usize, usize),
+) {
+    assert!(c.len() >= 4 * n && a_re.len() >= n && a_im.len() >= n && n >= 1);
+    assert!(c0 + 8 <= stride && (n - 1) * stride + c0 + 8 <= dst.len());
+    let sign_even = _mm256_set_pd(0.0, -0.0, 0.0, -0.0);
+    // SAFETY (all blocks below): k < n, so pairs_at reads inside c (4n complex) and every row
+    // k·stride + c0 … + 8 lies inside dst (asserted above).
+    let put = |dst: &mut [f64], k: usize, lo: __m256d, hi: __m256d| unsafe {
+        let d = dst.as_mut_ptr().add(k * stride + c0);
+        _mm256_storeu_pd(d, lo);
+        _mm256_storeu_pd(d.add(4), hi);
+    };
+    let ends = |dst: &mut [f64], k: usize| unsafe {
+        let f = _mm256_set1_pd(2.0 * a_re[k]);
+        let (v01, v23) = pairs_at(c, n, k);
+        put(dst, k, _mm256_mul_pd(v01, f), _mm256_mul_pd(v23, f));
+    };
+    ends(dst, 0);
+    if n & 1 == 0 {
+        ends(dst, n / 2);
+    }
+    for k in 1..n.div_ceil(2) {
+        unsafe {
+            let (al, ar) = (_mm256_set1_pd(a_re[k]), _mm256_set1_pd(a_im[k]));
+            let nar = _mm256_set1_pd(-a_im[k]);
+            let (v01, v23) = pairs_at(c, n, k);
+            let (w01, w23) = pairs_at(c, n, n - k);
+            let swap = |v: __m256d| _mm256_permute_pd::<0b0101>(v);
+            // P = (al re − ar im, al im + ar re); Q = (al re + ar im, al im − ar re).
+            let p = |v: __m256d| _mm256_addsub_pd(_mm256_mul_pd(al, v), _mm256_mul_pd(ar, swap(v)));
+            let q = |w: __m256d| _mm256_addsub_pd(_mm256_mul_pd(al, w), _mm256_mul_pd(nar, swap(w)));
+            let (p01, p23, q01, q23) = (p(v01), p(v23), q(w01), q(w23));
+            put(dst, k, _mm256_add_pd(p01, q01), _mm256_add_pd(p23, q23));
+            let mirror = |d: __m256d| _mm256_xor_pd(swap(d), sign_even);
+            put(dst, n - k, mirror(_mm256_sub_pd(p01, q01)), mirror(_mm256_sub_pd(p23, q23)));
+        }
+    }
+}
+
+/// A full block (4 pairs) of `Dct1d::unpack_inverse_rows` written transposed (moves only): row
+/// 2q of `dst` receives `V_q` of the 4 pairs (lines a, b as real, imaginary parts), row 2q + 1
+/// receives `V_(n−1−q)`, and for odd n row n − 1 receives `V_(n/2)`.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn unpack_inverse_columns(c: &[C64], n: usize, dst: &mut [f64], (c0, stride): (usize, usize)) {
+    assert!(c.len() >= 4 * n && n >= 1);
+    assert!(c0 + 8 <= stride && (n - 1) * stride + c0 + 8 <= dst.len());
+    // SAFETY (both uses): j < n and k < n (reads inside c, writes inside dst, asserted above).
+    let put = |dst: &mut [f64], j: usize, k: usize| unsafe {
+        let (v01, v23) = pairs_at(c, n, k);
+        let d = dst.as_mut_ptr().add(j * stride + c0);
+        _mm256_storeu_pd(d, v01);
+        _mm256_storeu_pd(d.add(4), v23);
+    };
+    for q in 0..n / 2 {
+        put(dst, 2 * q, q);
+        put(dst, 2 * q + 1, n - 1 - q);
+    }
+    if n & 1 == 1 {
+        put(dst, n - 1, n / 2);
+    }
+}
