@@ -107,6 +107,11 @@ fn dctn_matches_naive_and_round_trips_in_1d_2d_3d_4d() {
         vec![24, 16],
         vec![16, 33],
         vec![8, 9, 16],
+        // two-axis inverse: the pairing of rows (k, n1 − k) and (0, n1/2) at the smallest sizes
+        vec![2, 2],
+        vec![3, 2],
+        vec![2, 3],
+        vec![9, 10],
     ] {
         let plan = DctN::new(&shape);
         let len = plan.len();

@@ -87,6 +87,8 @@ pub struct Dct1d {
     /// Real and imaginary parts of `b`.
     b_re: Vec<f64>,
     b_im: Vec<f64>,
+    /// `b` per complex lane: `[b_k.re, b_k.re]`, `[b_k.im, b_k.im]`, `[−b_k.im, −b_k.im]` (length 2n).
+    b_dup: [Vec<f64>; 3],
 }
 
 impl Dct1d {
@@ -100,7 +102,20 @@ impl Dct1d {
         let (a_re, a_im) = (a.iter().map(|c| c.re).collect(), a.iter().map(|c| c.im).collect());
         let b: Vec<C64> = (0..n).map(|k| C64::from_polar(1.0 / (sigma(k) * nf), theta(k))).collect();
         let (b_re, b_im) = (b.iter().map(|c| c.re).collect(), b.iter().map(|c| c.im).collect());
-        Self { n, fwd: planner.plan_fft_forward(n), inv: planner.plan_fft_inverse(n), a, a_re, a_im, b, b_re, b_im }
+        let dup = |f: &dyn Fn(&C64) -> f64| b.iter().flat_map(|c| [f(c), f(c)]).collect::<Vec<f64>>();
+        let b_dup = [dup(&|c| c.re), dup(&|c| c.im), dup(&|c| -c.im)];
+        Self {
+            n,
+            fwd: planner.plan_fft_forward(n),
+            inv: planner.plan_fft_inverse(n),
+            a,
+            a_re,
+            a_im,
+            b,
+            b_re,
+            b_im,
+            b_dup,
+        }
     }
 
     /// Plans a transform of length `n ≥ 1` with a private FFT planner.
@@ -501,6 +516,144 @@ impl Dct1d {
             }
         }
         (acc[0] + acc[1]) + (acc[2] + acc[3])
+    }
+
+    /// First pass of a two-axis inverse, fused with the second pass's preparation. `self` inverts
+    /// along the rows of `src` (`next.len()` rows of length `self.len()`, times `weight`, laid out as
+    /// `src`); row k is paired with row n1 − k (row 0 with row n1/2, or with zeros for odd n1) in
+    /// one complex FFT, so that each pair's output holds, for every pair of sample rows (2q, 2q + 1),
+    /// both `U_k` and `U_(n1−k)` of `next`'s inverse: `V_k = b_k (U_k − i U_(n1−k))` and
+    /// `V_(n1−k) = conj(b_k) (U_k + i U_(n1−k))` (`next.b`), written to `out[q·n1 + k]` — the input
+    /// of `next`'s FFT ([`Self::finish_pair_rows`]), with no transposed real intermediate and no
+    /// second preparation pass. `out` holds ⌈n0/2⌉ rows of n1.
+    pub(super) fn inverse_rows_into_next(
+        &self,
+        src: &[f64],
+        weight: Option<&[f64]>,
+        next: &Dct1d,
+        out: &mut [C64],
+        s: &mut LineScratch,
+    ) {
+        let (n0, n1) = (self.n, next.n);
+        let m = (n1 - 1) / 2;
+        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let zeros = &zeros[..n0];
+        // Pack the pair (ka, kb) (kb = None: zeros) into complex line p of c1.
+        let pack = |c1: &mut [C64], p: usize, ka: usize, kb: Option<usize>| {
+            let v = &mut c1[p * n0..(p + 1) * n0];
+            let xa = &src[ka * n0..][..n0];
+            let xb = kb.map_or(zeros, |k| &src[k * n0..][..n0]);
+            match weight {
+                None => self.pack_inverse::<false>(v, xa, xb, xa, xb),
+                Some(w) => {
+                    let ga = &w[ka * n0..][..n0];
+                    let gb = kb.map_or(zeros, |k| &w[k * n0..][..n0]);
+                    self.pack_inverse::<true>(v, xa, xb, ga, gb);
+                }
+            }
+        };
+        // Row 0 with row n1/2 (even n1) or zeros.
+        pack(c1, 0, 0, (n1 & 1 == 0).then_some(n1 / 2));
+        self.inv.process_outofplace_with_scratch(&mut c1[..n0], &mut c2[..n0], fft);
+        next.fuse_ends(&c2[..n0], n0, out);
+        // Rows (k, n1 − k), k = 1 … m, four pairs per FFT call.
+        for k0 in (1..=m).step_by(BLOCK / 2) {
+            let np = (m + 1 - k0).min(BLOCK / 2);
+            for p in 0..np {
+                pack(c1, p, k0 + p, Some(n1 - k0 - p));
+            }
+            self.inv.process_outofplace_with_scratch(&mut c1[..np * n0], &mut c2[..np * n0], fft);
+            #[allow(unused_mut)]
+            let mut q_done = 0;
+            #[cfg(target_arch = "x86_64")]
+            if np == BLOCK / 2 && simd::available() {
+                let [re, im, nim] = &next.b_dup;
+                // SAFETY: AVX2 is available.
+                unsafe { simd::fuse_pairs(&c2[..np * n0], n0, k0, [re, im, nim], out, n1) };
+                q_done = n0 / 2;
+            }
+            next.fuse_pairs(&c2[..np * n0], np, n0, k0, out, q_done);
+        }
+    }
+
+    /// [`Self::inverse_rows_into_next`] for the pair (0, n1/2) (or (0, zeros)): `V_0 = b_0 U_0`,
+    /// and for even n1 `V_(n1/2) = b (1 − i) U_(n1/2)` (real factor), `self` being the second axis.
+    fn fuse_ends(&self, c: &[C64], n0: usize, out: &mut [C64]) {
+        let n1 = self.n;
+        let b0 = self.b[0].re;
+        let bh = self.b[n1 / 2];
+        let fac = bh.re + bh.im;
+        for q in 0..n0.div_ceil(2) {
+            let (a, b) = (c[q], if 2 * q + 1 < n0 { c[n0 - 1 - q] } else { C64::new(0.0, 0.0) });
+            out[q * n1] = C64::new(a.re * b0, b.re * b0);
+            if n1 & 1 == 0 {
+                out[q * n1 + n1 / 2] = C64::new(a.im * fac, b.im * fac);
+            }
+        }
+    }
+
+    /// [`Self::inverse_rows_into_next`] for `pairs` pairs (k0 + p, n1 − k0 − p) from sample-row pair
+    /// `q_start` on (`self` the second axis; scalar twin of `simd::fuse_pairs`). With `A` the pair's
+    /// FFT output at bin q (samples 2q of rows k, n1 − k) and `B` at bin n0 − 1 − q (samples 2q + 1;
+    /// zero for the last row of an odd n0): `U_k = (A.re, B.re)`, `U_(n1−k) = (A.im, B.im)`.
+    fn fuse_pairs(&self, c: &[C64], pairs: usize, n0: usize, k0: usize, out: &mut [C64], q_start: usize) {
+        let n1 = self.n;
+        for p in 0..pairs {
+            let k = k0 + p;
+            let (br, bi, nbi) = (self.b_re[k], self.b_im[k], -self.b_im[k]);
+            let c = &c[p * n0..(p + 1) * n0];
+            for q in q_start..n0.div_ceil(2) {
+                let (a, b) = (c[q], if 2 * q + 1 < n0 { c[n0 - 1 - q] } else { C64::new(0.0, 0.0) });
+                let (s1, s2) = (a.re + b.im, b.re - a.im);
+                let (d1, d2) = (a.re - b.im, a.im + b.re);
+                out[q * n1 + k] = C64::new(br * s1 - bi * s2, br * s2 + bi * s1);
+                out[q * n1 + n1 - k] = C64::new(br * d1 - nbi * d2, br * d2 + nbi * d1);
+            }
+        }
+    }
+
+    /// Second pass of a two-axis inverse: the FFT of the rows of `c` (from
+    /// [`Self::inverse_rows_into_next`], ⌈n0/2⌉ rows of `self.len()`; used as scratch), whose row q
+    /// holds sample rows 2q and 2q + 1 of the result; writes them to `keep` (n0 rows) and/or
+    /// returns `Σ w (y − x)²` against `rss = (y, w)` (n0 rows each), summed pair by pair.
+    pub(super) fn finish_pair_rows(
+        &self,
+        c: &mut [C64],
+        n0: usize,
+        rss: Option<(&[f64], &[f64])>,
+        mut keep: Option<&mut [f64]>,
+        s: &mut LineScratch,
+    ) -> f64 {
+        let n = self.n;
+        let rows = n0.div_ceil(2);
+        let mut total = 0.0;
+        for q0 in (0..rows).step_by(BLOCK / 2) {
+            let nq = (rows - q0).min(BLOCK / 2);
+            let LineScratch { c2, fft, sink, .. } = s;
+            self.inv.process_outofplace_with_scratch(&mut c[q0 * n..(q0 + nq) * n], &mut c2[..nq * n], fft);
+            for (i, v) in c2.chunks_exact(n).take(nq).enumerate() {
+                let ra = 2 * (q0 + i);
+                let both = ra + 1 < n0;
+                let rb = if both { ra + 1 } else { ra };
+                if let Some(out) = keep.as_deref_mut() {
+                    if both {
+                        let (a, b) = out[ra * n..].split_at_mut(n);
+                        self.unpack_inverse_rows(v, a, &mut b[..n]);
+                    } else {
+                        self.unpack_inverse_rows(v, &mut out[ra * n..][..n], &mut sink[..n]);
+                    }
+                }
+                if let Some((y, w)) = rss {
+                    let (ya, yb, wa, wb) = (&y[ra * n..][..n], &y[rb * n..][..n], &w[ra * n..][..n], &w[rb * n..][..n]);
+                    total += if both {
+                        self.rss_pair::<true>(v, [ya, yb], [wa, wb])
+                    } else {
+                        self.rss_pair::<false>(v, [ya, yb], [wa, wb])
+                    };
+                }
+            }
+        }
+        total
     }
 
     /// Transforms the rows of `data` in place.

@@ -5,7 +5,7 @@ use std::sync::{Mutex, OnceLock};
 
 use rustfft::FftPlanner;
 
-use super::{Dct1d, LineScratch};
+use super::{Dct1d, LineScratch, C64};
 
 /// Tile edge of the cache-blocked transpose.
 const TILE: usize = 16;
@@ -28,12 +28,14 @@ pub struct DctN {
 pub struct DctNScratch {
     line: LineScratch,
     tmp: Vec<f64>,
+    /// Two axes: the second pass's FFT input (⌈n0/2⌉ × n1), written by the first inverse pass.
+    pairs: Vec<C64>,
 }
 
 impl DctNScratch {
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.line.bytes() + self.tmp.capacity() * 8
+        self.line.bytes() + self.tmp.capacity() * 8 + self.pairs.capacity() * std::mem::size_of::<C64>()
     }
 }
 
@@ -109,7 +111,15 @@ impl DctN {
             k if k >= 3 => self.len,
             _ => 0,
         };
-        DctNScratch { line: LineScratch::new(max_n, fft), tmp: vec![0.0; tmp_len] }
+        let pairs_len = match self.plans.len() {
+            2 => self.plans[0].len().div_ceil(2) * self.plans[1].len(),
+            _ => 0,
+        };
+        DctNScratch {
+            line: LineScratch::new(max_n, fft),
+            tmp: vec![0.0; tmp_len],
+            pairs: vec![C64::default(); pairs_len],
+        }
     }
 
     /// Forward orthonormal DCT-II of the spatial array `input` into `output` (spectral layout).
@@ -136,7 +146,7 @@ impl DctN {
     #[inline(always)]
     fn forward_body(&self, input: &[f64], output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
-        let DctNScratch { line, tmp } = s;
+        let DctNScratch { line, tmp, .. } = s;
         if k == 0 {
             output.copy_from_slice(input);
             return;
@@ -212,9 +222,9 @@ impl DctN {
                 self.plans[0].rows((input, n, self.len / n), weight, (output, n), true, false, &mut s.line);
             }
             2 => {
-                let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
-                self.plans[0].rows((input, n0, n1), weight, (&mut s.tmp[..], n1 + PAD), true, true, &mut s.line);
-                self.plans[1].rows((&s.tmp[..], n1 + PAD, n0), None, (output, n1), true, false, &mut s.line);
+                let (p0, p1) = (&self.plans[0], &self.plans[1]);
+                p0.inverse_rows_into_next(input, weight, p1, &mut s.pairs, &mut s.line);
+                p1.finish_pair_rows(&mut s.pairs, p0.len(), None, Some(output), &mut s.line);
             }
             k => {
                 self.inverse_all_but_last(input, weight, output, s);
@@ -306,9 +316,9 @@ impl DctN {
                 self.plans[0].rows_rss((input, n, self.len / n), weight, (y, w), keep, &mut s.line)
             }
             2 => {
-                let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
-                self.plans[0].rows((input, n0, n1), weight, (&mut s.tmp[..], n1 + PAD), true, true, &mut s.line);
-                self.plans[1].rows_rss((&s.tmp[..], n1 + PAD, n0), None, (y, w), keep, &mut s.line)
+                let (p0, p1) = (&self.plans[0], &self.plans[1]);
+                p0.inverse_rows_into_next(input, weight, p1, &mut s.pairs, &mut s.line);
+                p1.finish_pair_rows(&mut s.pairs, p0.len(), Some((y, w)), keep, &mut s.line)
             }
             k => {
                 self.inverse_all_but_last(input, weight, work, s);
@@ -323,7 +333,7 @@ impl DctN {
     #[inline(always)]
     fn inverse_all_but_last(&self, input: &[f64], weight: Option<&[f64]>, output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
-        let DctNScratch { line, tmp } = s;
+        let DctNScratch { line, tmp, .. } = s;
         // Layout rotL^(t+1)(a): invert the last axis a_t, then move the first axis to the end (K ≥ 3;
         // two axes take the padded path of the callers).
         for t in 0..k - 1 {

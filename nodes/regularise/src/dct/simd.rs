@@ -389,3 +389,43 @@ pub(super) unsafe fn unpack_inverse_columns(c: &[C64], n: usize, dst: &mut [f64]
         put(dst, n - 1, n / 2);
     }
 }
+
+/// Body of `Dct1d::fuse_pairs` for four pairs (k0 + p, n1 − k0 − p) as lanes, sample-row pairs
+/// q < n0/2: with `A` the pairs' FFT output at bin q, `B` at bin n0 − 1 − q and `B'` = B with real
+/// and imaginary parts swapped, `A + B'`, `A − B'` and `B' − A` give `s1 = A.re + B.im`,
+/// `s2 = B.re − A.im`, `d1 = A.re − B.im`, `d2 = A.im + B.re`; `V_k = (br s1 − bi s2, br s2 + bi s1)`
+/// and `V_(n1−k) = (br d1 − (−bi) d2, br d2 + (−bi) d1)` by `vaddsubpd` — the scalar twin's
+/// operations. `b = [re, im, −im]` per complex lane (length 2·n1).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn fuse_pairs(c: &[C64], n0: usize, k0: usize, b: [&[f64]; 3], out: &mut [C64], n1: usize) {
+    assert!(c.len() >= 4 * n0 && k0 >= 1 && k0 + 3 <= (n1 - 1) / 2);
+    assert!(b.iter().all(|s| s.len() >= 2 * n1) && out.len() >= n0 / 2 * n1);
+    // SAFETY: 2(k0 + 2) + 4 ≤ 2·n1 (asserted above).
+    let ld = |s: &[f64], k: usize| unsafe { _mm256_loadu_pd(s.as_ptr().add(2 * k)) };
+    let lanes = [(ld(b[0], k0), ld(b[1], k0), ld(b[2], k0)), (ld(b[0], k0 + 2), ld(b[1], k0 + 2), ld(b[2], k0 + 2))];
+    let swap = |v: __m256d| _mm256_permute_pd::<0b0101>(v);
+    for q in 0..n0 / 2 {
+        // SAFETY: q, n0 − 1 − q < n0 (pairs_at reads inside c); row q of out has n1 complex and
+        // k0 + 3 < n1 − k0 − 3, so the stores at k0 … k0 + 3 and n1 − k0 − 3 … n1 − k0 are inside it.
+        unsafe {
+            let (a01, a23) = pairs_at(c, n0, q);
+            let (b01, b23) = pairs_at(c, n0, n0 - 1 - q);
+            let row = out.as_mut_ptr().add(q * n1).cast::<f64>();
+            for (i, (a, bb)) in [(a01, b01), (a23, b23)].into_iter().enumerate() {
+                let (re, im, nim) = lanes[i];
+                let sb = swap(bb);
+                let (p, m, nn) = (_mm256_add_pd(a, sb), _mm256_sub_pd(a, sb), _mm256_sub_pd(sb, a));
+                let sv = _mm256_blend_pd::<0b1010>(p, nn);
+                let dv = _mm256_blend_pd::<0b1010>(m, p);
+                let vk = _mm256_addsub_pd(_mm256_mul_pd(re, sv), _mm256_mul_pd(im, swap(sv)));
+                let vnk = _mm256_addsub_pd(_mm256_mul_pd(re, dv), _mm256_mul_pd(nim, swap(dv)));
+                let k = k0 + 2 * i;
+                _mm256_storeu_pd(row.add(2 * k), vk);
+                _mm256_storeu_pd(row.add(2 * (n1 - k - 1)), _mm256_permute2f128_pd::<0x01>(vnk, vnk));
+            }
+        }
+    }
+}
