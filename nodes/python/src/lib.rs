@@ -522,6 +522,23 @@ fn vector_doppler<'py>(
     ))
 }
 
+/// The workspace of the last `smoothn` call (one per process), reused by the next call of the
+/// same grid and component count. Only workspaces up to [`SMOOTHN_CACHE_BYTES`] are kept, so a
+/// large grid's memory is returned when its call ends.
+static SMOOTHN_CACHE: std::sync::Mutex<Option<Smoothn>> = std::sync::Mutex::new(None);
+const SMOOTHN_CACHE_BYTES: usize = 64 << 20;
+
+fn take_cached_smoothn(grid: &[usize], components: usize) -> Option<Smoothn> {
+    let mut slot = SMOOTHN_CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    slot.take_if(|ws| ws.shape() == grid && ws.components() == components)
+}
+
+fn keep_smoothn(ws: Smoothn) {
+    if ws.workspace_bytes() <= SMOOTHN_CACHE_BYTES {
+        *SMOOTHN_CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(ws);
+    }
+}
+
 /// smoothn of `y` (components × grid, C order, NaN = missing) with optional weights of the
 /// grid's size; `params_json` a `SmoothnParams`. Returns (z, S, converged, outlier fraction).
 #[pyfunction]
@@ -552,9 +569,13 @@ fn smoothn<'py>(
     }
     let shape: Vec<usize> = y.shape().to_vec();
     let (out, report) = compute(py, || -> PyResult<_> {
-        let mut ws = Smoothn::new(&grid, components).map_err(|e| value_error("y", e))?;
+        let mut ws = match take_cached_smoothn(&grid, components) {
+            Some(ws) => ws,
+            None => Smoothn::new(&grid, components).map_err(|e| value_error("y", e))?,
+        };
         let mut out = vec![0.0; n * components];
         let report = ws.smooth(data, w, &params, &mut out).map_err(|e| value_error("smoothn", e))?;
+        keep_smoothn(ws);
         Ok((out, report))
     })?;
     let arr = PyArray1::from_vec(py, out).reshape(shape)?;
