@@ -557,8 +557,15 @@ impl Dct1d {
         self.inv.process_outofplace_with_scratch(&mut c1[..n0], &mut c2[..n0], fft);
         next.fuse_ends(&c2[..n0], n0, out);
         // Rows (k, n1 − k), k = 1 … m, four pairs per FFT call.
-        for k0 in (1..=m).step_by(BLOCK / 2) {
-            let np = (m + 1 - k0).min(BLOCK / 2);
+        let mut k0 = 1;
+        while k0 <= m {
+            let mut np = (m + 1 - k0).min(BLOCK / 2);
+            #[cfg(target_arch = "x86_64")]
+            if np < BLOCK / 2 && m >= BLOCK / 2 && simd::available() {
+                // The last pairs as a full block ending at m (its first pairs are done again, to
+                // the same values), so that the vector kernel covers them.
+                (k0, np) = (m + 1 - BLOCK / 2, BLOCK / 2);
+            }
             for p in 0..np {
                 pack(c1, p, k0 + p, Some(n1 - k0 - p));
             }
@@ -573,6 +580,7 @@ impl Dct1d {
                 q_done = n0 / 2;
             }
             next.fuse_pairs(&c2[..np * n0], np, n0, k0, out, q_done);
+            k0 += np;
         }
     }
 

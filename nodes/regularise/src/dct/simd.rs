@@ -51,7 +51,7 @@ unsafe fn store_complex(p: *mut f64, re: __m256d, im: __m256d) {
 /// Body of `Dct1d::pack_inverse` over the pairs (k, n − k) in blocks of four: for block j0 and
 /// `r0 = m − 4 − j0`, `lo[j] = b (U − iR)`, `hi[m − 1 − j] = conj(b) (U + iR)` with
 /// `U = (xal gal, xbl gbl)[j]`, `R = (xah gah, xbh gbh)[m − 1 − j]` (no `g` without `WEIGHTED`).
-/// Every slice has length m = `lo.len()`; returns the number of pairs done (a multiple of 4).
+/// Every slice has length m = `lo.len()`; returns the number of pairs done (m, or 0 for m < 4).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -67,9 +67,15 @@ pub(super) unsafe fn pack_inverse<const WEIGHTED: bool>(
     let m = lo.len();
     assert!(hi.len() == m && b.iter().chain(&x).all(|s| s.len() == m));
     assert!(!WEIGHTED || g.iter().all(|s| s.len() == m));
-    let body = m / 4 * 4;
-    let mut j0 = 0;
-    while j0 < body {
+    if m < 4 {
+        return 0;
+    }
+    // Blocks at 0, 4, …; a last partial block is done as the block ending at m, overlapping the
+    // one before it (the overlapped pairs get the same values again).
+    let mut next = 0;
+    while next < m {
+        let j0 = next.min(m - 4);
+        next = j0 + 4;
         let r0 = m - 4 - j0;
         // SAFETY: j0 + 4 ≤ m and r0 + 4 ≤ m, so every access is in bounds (lengths asserted above);
         // lo and hi hold m complex numbers (2m f64, repr(C)).
@@ -92,9 +98,8 @@ pub(super) unsafe fn pack_inverse<const WEIGHTED: bool>(
             store_complex(lo.as_mut_ptr().add(j0).cast::<f64>(), lre, lim);
             store_complex(hi.as_mut_ptr().add(r0).cast::<f64>(), rev(hre), rev(him));
         }
-        j0 += 4;
     }
-    body
+    m
 }
 
 /// Body of `Dct1d::rss_pair` (both lines): over blocks of two q, accumulates
@@ -208,7 +213,7 @@ pub(super) unsafe fn unpack_inverse_rows(lo: &[C64], hi: &[C64], xa: &mut [f64],
 /// `V_(n−k) = vh[m − 1 − j]`, `a = (ar[j], ai[j])`): `yl = (P + Q)` (lines a, b as real and
 /// imaginary parts) and `yh[m − 1 − j] = (−(P.im − Q.im), P.re − Q.re)`. The same IEEE operations
 /// in the same order as the scalar loop. Every slice has length m = `vl.len()`; returns the pairs
-/// done (a multiple of 4).
+/// done (m, or 0 for m < 4).
 ///
 /// # Safety
 /// The CPU must support AVX2.
@@ -225,10 +230,15 @@ pub(super) unsafe fn unpack_forward(
     assert!(yl.iter().chain(&yh).all(|s| s.len() == m));
     let [yal, ybl] = yl;
     let [yah, ybh] = yh;
-    let body = m / 4 * 4;
+    if m < 4 {
+        return 0;
+    }
     let sign = _mm256_set1_pd(-0.0);
-    let mut j0 = 0;
-    while j0 < body {
+    // As `pack_inverse`: a last partial block overlaps the one before it.
+    let mut next = 0;
+    while next < m {
+        let j0 = next.min(m - 4);
+        next = j0 + 4;
         let r0 = m - 4 - j0;
         // SAFETY: j0 + 4 ≤ m and r0 + 4 ≤ m, so every access is in bounds (lengths asserted above);
         // vl and vh hold m complex numbers (2m f64, repr(C)).
@@ -247,9 +257,8 @@ pub(super) unsafe fn unpack_forward(
             _mm256_storeu_pd(yah.as_mut_ptr().add(r0), rev(neg));
             _mm256_storeu_pd(ybh.as_mut_ptr().add(r0), rev(_mm256_sub_pd(pr, qr)));
         }
-        j0 += 4;
     }
-    body
+    m
 }
 
 /// Writes the `lines` rows of `block` (row-major, length n each) as columns `c0 … c0 + lines` of
