@@ -18,8 +18,10 @@
 //! work in the DCT domain is layout-agnostic; [`DctN::spectral_indices`] maps each coefficient to
 //! its per-axis frequency indices.
 //! A full block of [`BLOCK`] lines is written transposed straight from the FFT output, its four
-//! pairs as the lanes of AVX2 vectors (one 64-byte row segment per coefficient); two axes go
-//! through a row-padded intermediate (no in-place pass, no power-of-two row stride).
+//! pairs as the lanes of AVX2 vectors (one 64-byte row segment per coefficient). Two axes (the
+//! smoother's case) take a fused path: the first pass pairs the lines so that each pair's FFT
+//! output holds what the second pass's FFT input needs, which is written directly (see
+//! `Dct1d::inverse_rows_into_next` and `Dct1d::forward_rows_into_next`).
 //!
 //! A plan ([`DctN`]) is immutable and shareable across threads; each thread brings its own
 //! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
@@ -662,6 +664,115 @@ impl Dct1d {
             }
         }
         total
+    }
+
+    /// First pass of a two-axis forward transform, fused with the second pass's preparation.
+    /// `self` transforms the `next.len()` rows of `src` (length `self.len()`), paired (2p, 2p + 1);
+    /// from each pair's coefficients `X_k`, `X_(n1−k)` the second pass's Makhoul-reordered input
+    /// of the line pair (k, n1 − k) follows: `w_p = (X_k[2p], X_(n1−k)[2p])`,
+    /// `w_(n0−1−p) = (X_k[2p+1], X_(n1−k)[2p+1])` (row 0: the pair (0, n1/2), or (0, zeros) for odd
+    /// n1), written to `out[P·n0 + …]` for line pair P = k ([`Self::finish_forward_pairs`]). `out`
+    /// holds ⌊(n1 − 1)/2⌋ + 1 rows of n0.
+    pub(super) fn forward_rows_into_next(&self, src: &[f64], next: &Dct1d, out: &mut [C64], s: &mut LineScratch) {
+        let n0 = next.n;
+        let full = n0 / 2;
+        let mut p0 = 0;
+        while p0 < full {
+            let mut np = (full - p0).min(BLOCK / 2);
+            #[cfg(target_arch = "x86_64")]
+            if np < BLOCK / 2 && full >= BLOCK / 2 && simd::available() {
+                // The last pairs as a full block (its first pairs again, to the same values).
+                (p0, np) = (full - BLOCK / 2, BLOCK / 2);
+            }
+            self.forward_pair_block(src, n0, (p0, np, false), out, s);
+            p0 += np;
+        }
+        if n0 & 1 == 1 {
+            // The last row alone (paired with zeros): only w_p.
+            self.forward_pair_block(src, n0, (full, 1, true), out, s);
+        }
+    }
+
+    /// One FFT call of [`Self::forward_rows_into_next`]: row pairs p0 … p0 + np (`half`: the last
+    /// row of an odd n0, alone).
+    fn forward_pair_block(
+        &self,
+        src: &[f64],
+        n0: usize,
+        (p0, np, half): (usize, usize, bool),
+        out: &mut [C64],
+        s: &mut LineScratch,
+    ) {
+        let n1 = self.n;
+        let m1 = (n1 - 1) / 2;
+        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let zeros = &zeros[..n1];
+        for i in 0..np {
+            let p = p0 + i;
+            let xa = &src[2 * p * n1..][..n1];
+            let xb = if half { zeros } else { &src[(2 * p + 1) * n1..][..n1] };
+            self.pack_forward(&mut c1[i * n1..(i + 1) * n1], xa, xb);
+        }
+        self.fwd.process_outofplace_with_scratch(&mut c1[..np * n1], &mut c2[..np * n1], fft);
+        let c = &c2[..np * n1];
+        // Line pair 0: X_0 and X_(n1/2) = 2 Re(a) V (zeros for odd n1).
+        let (a0, ah) = (2.0 * self.a[0].re, 2.0 * self.a[n1 / 2].re);
+        for i in 0..np {
+            let p = p0 + i;
+            let x0 = c[i * n1] * a0;
+            let xh = if n1 & 1 == 0 { c[i * n1 + n1 / 2] * ah } else { C64::new(0.0, 0.0) };
+            out[p] = C64::new(x0.re, xh.re);
+            if !half {
+                out[n0 - 1 - p] = C64::new(x0.im, xh.im);
+            }
+        }
+        #[allow(unused_mut)]
+        let mut k_done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if np == BLOCK / 2 && !half && simd::available() {
+            // SAFETY: AVX2 is available.
+            unsafe { simd::fuse_forward_pairs(c, n1, (&self.a_re, &self.a_im), out, (p0, n0)) };
+            k_done = m1;
+        }
+        for k in k_done + 1..=m1 {
+            let (al, ar) = (self.a_re[k], self.a_im[k]);
+            for i in 0..np {
+                let p = p0 + i;
+                let (v, w) = (c[i * n1 + k], c[i * n1 + n1 - k]);
+                // P = a V_k, Q = conj(a) V_(n1−k); X_k = P + Q, X_(n1−k) = i (P − Q).
+                let (pr, pi) = (al * v.re - ar * v.im, al * v.im + ar * v.re);
+                let (qr, qi) = (al * w.re + ar * w.im, al * w.im - ar * w.re);
+                let (sum, d) = (C64::new(pr + qr, pi + qi), C64::new(pr - qr, pi - qi));
+                out[k * n0 + p] = C64::new(sum.re, -d.im);
+                if !half {
+                    out[k * n0 + n0 - 1 - p] = C64::new(sum.im, d.re);
+                }
+            }
+        }
+    }
+
+    /// Second pass of a two-axis forward transform: the FFT of the line pairs of `w` (from
+    /// [`Self::forward_rows_into_next`]; used as scratch) and their coefficients into rows
+    /// (0, n1/2) and (k, n1 − k) of `out` (n1 rows of `self.len()`).
+    pub(super) fn finish_forward_pairs(&self, w: &mut [C64], n1: usize, out: &mut [f64], s: &mut LineScratch) {
+        let n = self.n;
+        let rows = (n1 - 1) / 2 + 1;
+        for r0 in (0..rows).step_by(BLOCK / 2) {
+            let nr = (rows - r0).min(BLOCK / 2);
+            let LineScratch { c2, fft, sink, .. } = s;
+            self.fwd.process_outofplace_with_scratch(&mut w[r0 * n..(r0 + nr) * n], &mut c2[..nr * n], fft);
+            for (i, v) in c2.chunks_exact(n).take(nr).enumerate() {
+                let k = r0 + i;
+                let kb = if k == 0 { (n1 & 1 == 0).then_some(n1 / 2) } else { Some(n1 - k) };
+                match kb {
+                    Some(kb) => {
+                        let (lo, hi) = out.split_at_mut(kb * n);
+                        self.unpack_forward_rows(v, &mut lo[k * n..(k + 1) * n], &mut hi[..n]);
+                    }
+                    None => self.unpack_forward_rows(v, &mut out[k * n..(k + 1) * n], &mut sink[..n]),
+                }
+            }
+        }
     }
 
     /// Transforms the rows of `data` in place.

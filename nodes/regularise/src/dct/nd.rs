@@ -10,10 +10,6 @@ use super::{Dct1d, LineScratch, C64};
 /// Tile edge of the cache-blocked transpose.
 const TILE: usize = 16;
 
-/// Padding (in f64) of the rows of the intermediate array of a 2-D transform: a power-of-two row
-/// length would map the column writes of the first pass onto a few cache sets.
-const PAD: usize = 8;
-
 /// Plan of an orthonormal N-D DCT-II / DCT-III for one row-major shape.
 pub struct DctN {
     shape: Vec<usize>,
@@ -103,16 +99,13 @@ impl DctN {
     pub fn make_scratch(&self) -> DctNScratch {
         let max_n = self.plans.iter().map(Dct1d::len).max().unwrap_or(1);
         let fft = self.plans.iter().map(Dct1d::fft_scratch_len).max().unwrap_or(0);
-        let tmp_len = match self.plans.len() {
+        let tmp_len = if self.plans.len() >= 3 { self.len } else { 0 };
+        let pairs_len = match self.plans.len() {
             2 => {
                 let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
-                (n1 * (n0 + PAD)).max(n0 * (n1 + PAD))
+                // inverse: ⌈n0/2⌉ rows of n1; forward: ⌊(n1 − 1)/2⌋ + 1 rows of n0
+                (n0.div_ceil(2) * n1).max(((n1 - 1) / 2 + 1) * n0)
             }
-            k if k >= 3 => self.len,
-            _ => 0,
-        };
-        let pairs_len = match self.plans.len() {
-            2 => self.plans[0].len().div_ceil(2) * self.plans[1].len(),
             _ => 0,
         };
         DctNScratch {
@@ -146,7 +139,7 @@ impl DctN {
     #[inline(always)]
     fn forward_body(&self, input: &[f64], output: &mut [f64], s: &mut DctNScratch) {
         let k = self.plans.len();
-        let DctNScratch { line, tmp, .. } = s;
+        let DctNScratch { line, tmp, pairs } = s;
         if k == 0 {
             output.copy_from_slice(input);
             return;
@@ -158,10 +151,10 @@ impl DctN {
             return;
         }
         if k == 2 {
-            // Along a1 into the padded (a1, a0) intermediate, then along a0 into `output`.
-            let (n0, n1) = (self.plans[0].len(), self.plans[1].len());
-            self.plans[1].rows((input, n1, n0), None, (&mut tmp[..], n0 + PAD), false, true, line);
-            self.plans[0].rows((&tmp[..], n0 + PAD, n1), None, (output, n0), false, false, line);
+            // Along a1, fused with the preparation of the pass along a0 (see `Dct1d::forward_rows_into_next`).
+            let (p0, p1) = (&self.plans[0], &self.plans[1]);
+            p1.forward_rows_into_next(input, p0, pairs, line);
+            p0.finish_forward_pairs(pairs, p1.len(), output, line);
             return;
         }
         // Step t transforms axis K-1-t (the current last axis) and rotates it to the front.

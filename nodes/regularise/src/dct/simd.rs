@@ -438,3 +438,46 @@ pub(super) unsafe fn fuse_pairs(c: &[C64], n0: usize, k0: usize, b: [&[f64]; 3],
         }
     }
 }
+
+/// Body of `Dct1d::forward_pair_block` for four row pairs p0 … p0 + 3 as lanes and k = 1 … m1:
+/// `P = a V_k`, `Q = conj(a) V_(n1−k)` (as `unpack_forward_columns`), `S = P + Q`, `D = P − Q`;
+/// `w_p = (S.re, −D.im)` at `out[k·n0 + p]`, `w_(n0−1−p) = (S.im, D.re)` at `out[k·n0 + n0 − 1 − p]`.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn fuse_forward_pairs(
+    c: &[C64],
+    n1: usize,
+    (a_re, a_im): (&[f64], &[f64]),
+    out: &mut [C64],
+    (p0, n0): (usize, usize),
+) {
+    let m1 = (n1 - 1) / 2;
+    assert!(c.len() >= 4 * n1 && a_re.len() >= n1 && a_im.len() >= n1);
+    assert!(p0 + 4 <= n0 / 2 && out.len() >= (m1 + 1) * n0);
+    let sign = _mm256_set1_pd(-0.0);
+    let swap = |v: __m256d| _mm256_permute_pd::<0b0101>(v);
+    for k in 1..=m1 {
+        // SAFETY: k, n1 − k < n1 (pairs_at reads inside c); row k of out has n0 complex, and
+        // p0 + 3 < n0/2 ≤ n0 − 4 − p0, so the stores at p0 … p0 + 3 and n0 − 4 − p0 … n0 − 1 − p0
+        // are inside it (asserted above).
+        unsafe {
+            let (al, ar, nar) = (_mm256_set1_pd(a_re[k]), _mm256_set1_pd(a_im[k]), _mm256_set1_pd(-a_im[k]));
+            let (v01, v23) = pairs_at(c, n1, k);
+            let (w01, w23) = pairs_at(c, n1, n1 - k);
+            let p = |v: __m256d| _mm256_addsub_pd(_mm256_mul_pd(al, v), _mm256_mul_pd(ar, swap(v)));
+            let q = |w: __m256d| _mm256_addsub_pd(_mm256_mul_pd(al, w), _mm256_mul_pd(nar, swap(w)));
+            let row = out.as_mut_ptr().add(k * n0).cast::<f64>();
+            for (i, (v, w)) in [(v01, w01), (v23, w23)].into_iter().enumerate() {
+                let (pv, qw) = (p(v), q(w));
+                let (s, d) = (_mm256_add_pd(pv, qw), _mm256_sub_pd(pv, qw));
+                let wp = _mm256_shuffle_pd::<0b1010>(s, _mm256_xor_pd(d, sign));
+                let wq = _mm256_shuffle_pd::<0b0101>(s, d);
+                let pp = p0 + 2 * i;
+                _mm256_storeu_pd(row.add(2 * pp), wp);
+                _mm256_storeu_pd(row.add(2 * (n0 - 2 - pp)), _mm256_permute2f128_pd::<0x01>(wq, wq));
+            }
+        }
+    }
+}
