@@ -32,6 +32,13 @@ unsafe fn rev(v: __m256d) -> __m256d {
     _mm256_permute4x64_pd::<0x1B>(v)
 }
 
+/// Starts of the blocks of four that cover `0..m` (m ≥ 4): 0, 4, …, and a last partial block done
+/// as the block ending at m, overlapping the one before it (its overlapped elements get the same
+/// values again).
+fn overlapping_blocks(m: usize) -> impl Iterator<Item = usize> {
+    (0..m.div_ceil(4)).map(move |b| (4 * b).min(m - 4))
+}
+
 /// Stores `(re[l], im[l])`, l = 0…3, as four consecutive complex numbers at `p`.
 ///
 /// # Safety
@@ -70,12 +77,7 @@ pub(super) unsafe fn pack_inverse<const WEIGHTED: bool>(
     if m < 4 {
         return 0;
     }
-    // Blocks at 0, 4, …; a last partial block is done as the block ending at m, overlapping the
-    // one before it (the overlapped pairs get the same values again).
-    let mut next = 0;
-    while next < m {
-        let j0 = next.min(m - 4);
-        next = j0 + 4;
+    for j0 in overlapping_blocks(m) {
         let r0 = m - 4 - j0;
         // SAFETY: j0 + 4 ≤ m and r0 + 4 ≤ m, so every access is in bounds (lengths asserted above);
         // lo and hi hold m complex numbers (2m f64, repr(C)).
@@ -234,11 +236,7 @@ pub(super) unsafe fn unpack_forward(
         return 0;
     }
     let sign = _mm256_set1_pd(-0.0);
-    // As `pack_inverse`: a last partial block overlaps the one before it.
-    let mut next = 0;
-    while next < m {
-        let j0 = next.min(m - 4);
-        next = j0 + 4;
+    for j0 in overlapping_blocks(m) {
         let r0 = m - 4 - j0;
         // SAFETY: j0 + 4 ≤ m and r0 + 4 ≤ m, so every access is in bounds (lengths asserted above);
         // vl and vh hold m complex numbers (2m f64, repr(C)).
