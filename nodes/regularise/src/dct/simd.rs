@@ -39,19 +39,57 @@ fn overlapping_blocks(m: usize) -> impl Iterator<Item = usize> {
     (0..m.div_ceil(4)).map(move |b| (4 * b).min(m - 4))
 }
 
-/// Stores `(re[l], im[l])`, l = 0…3, as four consecutive complex numbers at `p`.
+/// `vperm2f128` (halves of `a` and `b` chosen by `IMM`) in inline assembly: LLVM would otherwise
+/// turn some of these moves into `vpermpd` (two micro-ops and a lower throughput on Zen 2) or
+/// combine them with neighbouring shuffles into more `vpermpd`s. Moves only.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn perm2f128<const IMM: i32>(a: __m256d, b: __m256d) -> __m256d {
+    let r: __m256d;
+    // SAFETY: a register-only AVX instruction (the caller guarantees AVX2).
+    unsafe {
+        std::arch::asm!(
+            "vperm2f128 {r}, {a}, {b}, {imm}",
+            a = in(ymm_reg) a, b = in(ymm_reg) b, r = lateout(ymm_reg) r, imm = const IMM,
+            options(pure, nomem, nostack, preserves_flags),
+        );
+    }
+    r
+}
+
+/// Swaps the two 128-bit halves (`vperm2f128`, see [`perm2f128`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn swap_halves(v: __m256d) -> __m256d {
+    // SAFETY: the caller guarantees AVX2.
+    unsafe { perm2f128::<0x01>(v, v) }
+}
+
+/// Stores `(re[l], im[l])`, l = 0…3, as four consecutive complex numbers at `p`; `REVERSED`
+/// stores them in reverse order, `(re[3], im[3]), …, (re[0], im[0])` (moves only).
 ///
 /// # Safety
 /// The CPU must support AVX2; `p` must point to 8 writable f64.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn store_complex(p: *mut f64, re: __m256d, im: __m256d) {
+unsafe fn store_complex<const REVERSED: bool>(p: *mut f64, re: __m256d, im: __m256d) {
     let a = _mm256_unpacklo_pd(re, im); // re0 im0 re2 im2
     let b = _mm256_unpackhi_pd(re, im); // re1 im1 re3 im3
-                                        // SAFETY: the caller guarantees 8 writable f64 at p.
+    // SAFETY: the caller guarantees AVX2 and 8 writable f64 at p.
     unsafe {
-        _mm256_storeu_pd(p, _mm256_permute2f128_pd::<0x20>(a, b));
-        _mm256_storeu_pd(p.add(4), _mm256_permute2f128_pd::<0x31>(a, b));
+        let (first, second) = if REVERSED {
+            (perm2f128::<0x31>(b, a), perm2f128::<0x20>(b, a))
+        } else {
+            (perm2f128::<0x20>(a, b), perm2f128::<0x31>(a, b))
+        };
+        _mm256_storeu_pd(p, first);
+        _mm256_storeu_pd(p.add(4), second);
     }
 }
 
@@ -97,8 +135,8 @@ pub(super) unsafe fn pack_inverse<const WEIGHTED: bool>(
             let lim = _mm256_add_pd(_mm256_mul_pd(br, s2), _mm256_mul_pd(bi, s1));
             let hre = _mm256_add_pd(_mm256_mul_pd(br, d1), _mm256_mul_pd(bi, d2));
             let him = _mm256_sub_pd(_mm256_mul_pd(br, d2), _mm256_mul_pd(bi, d1));
-            store_complex(lo.as_mut_ptr().add(j0).cast::<f64>(), lre, lim);
-            store_complex(hi.as_mut_ptr().add(r0).cast::<f64>(), rev(hre), rev(him));
+            store_complex::<false>(lo.as_mut_ptr().add(j0).cast::<f64>(), lre, lim);
+            store_complex::<true>(hi.as_mut_ptr().add(r0).cast::<f64>(), hre, him);
         }
     }
     m
@@ -123,7 +161,7 @@ pub(super) unsafe fn rss_pair(lo: &[C64], hi: &[C64], y: [&[f64]; 2], w: [&[f64]
         unsafe {
             let e = _mm256_loadu_pd(lo.as_ptr().add(q0).cast::<f64>());
             let o = _mm256_loadu_pd(hi.as_ptr().add(h - 2 - q0).cast::<f64>());
-            let o = _mm256_permute2f128_pd::<0x01>(o, o);
+            let o = swap_halves(o);
             let ld = |s: &[f64]| _mm256_loadu_pd(s.as_ptr().add(2 * q0));
             let (ya, yb, wa, wb) = (ld(y[0]), ld(y[1]), ld(w[0]), ld(w[1]));
             let de = _mm256_sub_pd(_mm256_unpacklo_pd(ya, yb), e);
@@ -151,10 +189,13 @@ pub(super) unsafe fn rss_pair(lo: &[C64], hi: &[C64], y: [&[f64]; 2], w: [&[f64]
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn load_complex(p: *const f64) -> (__m256d, __m256d) {
-    // SAFETY: the caller guarantees 8 readable f64 at p.
-    let (a, b) = unsafe { (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4))) };
-    // unpack: (c0, c2, c1, c3) per part; permute (0, 2, 1, 3) puts them in order.
-    (_mm256_permute4x64_pd::<0xD8>(_mm256_unpacklo_pd(a, b)), _mm256_permute4x64_pd::<0xD8>(_mm256_unpackhi_pd(a, b)))
+    // SAFETY: the caller guarantees AVX2 and 8 readable f64 at p.
+    unsafe {
+        let (a, b) = (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4)));
+        // (c0, c2) and (c1, c3); unpacking them gives the parts in order.
+        let (t0, t1) = (perm2f128::<0x20>(a, b), perm2f128::<0x31>(a, b));
+        (_mm256_unpacklo_pd(t0, t1), _mm256_unpackhi_pd(t0, t1))
+    }
 }
 
 /// Body of `Dct1d::pack_forward` in blocks of two q: `v[q] = (xa[2q], xb[2q])`,
@@ -177,7 +218,7 @@ pub(super) unsafe fn pack_forward(v: &mut [C64], xa: &[f64], xb: &[f64]) -> usiz
             let even = _mm256_unpacklo_pd(a, b); // a0 b0 a2 b2: v[q0], v[q0 + 1]
             let odd = _mm256_unpackhi_pd(a, b); // a1 b1 a3 b3: v[n − 1 − q0], v[n − 2 − q0]
             _mm256_storeu_pd(v.as_mut_ptr().add(q0).cast::<f64>(), even);
-            _mm256_storeu_pd(v.as_mut_ptr().add(n - 2 - q0).cast::<f64>(), _mm256_permute2f128_pd::<0x01>(odd, odd));
+            _mm256_storeu_pd(v.as_mut_ptr().add(n - 2 - q0).cast::<f64>(), swap_halves(odd));
         }
         q0 += 2;
     }
@@ -201,7 +242,7 @@ pub(super) unsafe fn unpack_inverse_rows(lo: &[C64], hi: &[C64], xa: &mut [f64],
         unsafe {
             let e = _mm256_loadu_pd(lo.as_ptr().add(q0).cast::<f64>());
             let o = _mm256_loadu_pd(hi.as_ptr().add(h - 2 - q0).cast::<f64>());
-            let o = _mm256_permute2f128_pd::<0x01>(o, o);
+            let o = swap_halves(o);
             _mm256_storeu_pd(xa.as_mut_ptr().add(2 * q0), _mm256_unpacklo_pd(e, o));
             _mm256_storeu_pd(xb.as_mut_ptr().add(2 * q0), _mm256_unpackhi_pd(e, o));
         }
@@ -292,10 +333,10 @@ pub(super) unsafe fn transpose_block(
                 let (t0, t1) = (_mm256_unpacklo_pd(r0, r1), _mm256_unpackhi_pd(r0, r1));
                 let (t2, t3) = (_mm256_unpacklo_pd(r2, r3), _mm256_unpackhi_pd(r2, r3));
                 let d = dst.as_mut_ptr().add(k0 * stride + c0 + l0);
-                _mm256_storeu_pd(d, _mm256_permute2f128_pd::<0x20>(t0, t2));
-                _mm256_storeu_pd(d.add(stride), _mm256_permute2f128_pd::<0x20>(t1, t3));
-                _mm256_storeu_pd(d.add(2 * stride), _mm256_permute2f128_pd::<0x31>(t0, t2));
-                _mm256_storeu_pd(d.add(3 * stride), _mm256_permute2f128_pd::<0x31>(t1, t3));
+                _mm256_storeu_pd(d, perm2f128::<0x20>(t0, t2));
+                _mm256_storeu_pd(d.add(stride), perm2f128::<0x20>(t1, t3));
+                _mm256_storeu_pd(d.add(2 * stride), perm2f128::<0x31>(t0, t2));
+                _mm256_storeu_pd(d.add(3 * stride), perm2f128::<0x31>(t1, t3));
             }
         }
         k0 += 4;
@@ -431,7 +472,7 @@ pub(super) unsafe fn fuse_pairs(c: &[C64], n0: usize, k0: usize, b: [&[f64]; 3],
                 let vnk = _mm256_addsub_pd(_mm256_mul_pd(re, dv), _mm256_mul_pd(nim, swap(dv)));
                 let k = k0 + 2 * i;
                 _mm256_storeu_pd(row.add(2 * k), vk);
-                _mm256_storeu_pd(row.add(2 * (n1 - k - 1)), _mm256_permute2f128_pd::<0x01>(vnk, vnk));
+                _mm256_storeu_pd(row.add(2 * (n1 - k - 1)), swap_halves(vnk));
             }
         }
     }
@@ -474,7 +515,7 @@ pub(super) unsafe fn fuse_forward_pairs(
                 let wq = _mm256_shuffle_pd::<0b0101>(s, d);
                 let pp = p0 + 2 * i;
                 _mm256_storeu_pd(row.add(2 * pp), wp);
-                _mm256_storeu_pd(row.add(2 * (n0 - 2 - pp)), _mm256_permute2f128_pd::<0x01>(wq, wq));
+                _mm256_storeu_pd(row.add(2 * (n0 - 2 - pp)), swap_halves(wq));
             }
         }
     }
