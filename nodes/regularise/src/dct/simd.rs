@@ -79,9 +79,9 @@ unsafe fn swap_halves(v: __m256d) -> __m256d {
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn store_complex<const REVERSED: bool>(p: *mut f64, re: __m256d, im: __m256d) {
-    let a = _mm256_unpacklo_pd(re, im); // re0 im0 re2 im2
-    let b = _mm256_unpackhi_pd(re, im); // re1 im1 re3 im3
-                                        // SAFETY: the caller guarantees AVX2 and 8 writable f64 at p.
+    // a = (re0 im0 re2 im2), b = (re1 im1 re3 im3).
+    let (a, b) = (_mm256_unpacklo_pd(re, im), _mm256_unpackhi_pd(re, im));
+    // SAFETY: the caller guarantees AVX2 and 8 writable f64 at p.
     unsafe {
         let (first, second) = if REVERSED {
             (perm2f128::<0x31>(b, a), perm2f128::<0x20>(b, a))
