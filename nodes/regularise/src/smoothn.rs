@@ -490,9 +490,8 @@ impl Smoothn {
 
     /// `Γ = 1 / (1 + S Λ^m)`.
     fn set_gamma(&mut self, s: f64) {
-        for (g, l) in self.gamma.iter_mut().zip(&self.lambda_m) {
-            *g = 1.0 / (1.0 + s * l);
-        }
+        // The GCV's kernel (the same operation per element, vectorised); its sums are not needed.
+        gamma_sums(&mut self.gamma, &self.lambda_m, None, s, &mut self.partials);
     }
 
     /// Minimises the GCV score over log10 S; returns (log10 S, evaluations).
