@@ -413,6 +413,53 @@ impl Dct1d {
         }
     }
 
+    /// [`Self::unpack_inverse_rows`] that also returns `Σ w (y − x)²` (as `(w·d)·d`) of line a,
+    /// plus line b when `both`, against the data rows `y` and weights `w`: one running sum per line
+    /// and sample index mod 4 (the AVX2 kernel's lanes), added in a fixed order.
+    #[inline(always)]
+    fn unpack_rss_pair(
+        &self,
+        v: &[C64],
+        xa: &mut [f64],
+        xb: &mut [f64],
+        y: [&[f64]; 2],
+        w: [&[f64]; 2],
+        both: bool,
+    ) -> f64 {
+        let n = self.n;
+        let h = n / 2;
+        let (lo, hi) = v[..n].split_at(n - h);
+        let hi = &hi[..h];
+        let (xa, xb) = (&mut xa[..n], &mut xb[..n]);
+        let (ya, yb, wa, wb) = (&y[0][..n], &y[1][..n], &w[0][..n], &w[1][..n]);
+        #[allow(unused_mut)]
+        let (mut done, mut acc) = (0, [[0.0f64; 4]; 2]);
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: AVX2 is available.
+            (done, acc) = unsafe { simd::unpack_rss(lo, hi, [&mut *xa, &mut *xb], [ya, yb], [wa, wb]) };
+        }
+        for q in done..h {
+            let (e, o) = (lo[q], hi[h - 1 - q]);
+            (xa[2 * q], xb[2 * q]) = (e.re, e.im);
+            (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
+        }
+        if n & 1 == 1 {
+            (xa[n - 1], xb[n - 1]) = (lo[h].re, lo[h].im);
+        }
+        for i in 2 * done..n {
+            let (da, db) = (ya[i] - xa[i], yb[i] - xb[i]);
+            acc[0][i % 4] += wa[i] * da * da;
+            acc[1][i % 4] += wb[i] * db * db;
+        }
+        let line = |a: [f64; 4]| (a[0] + a[1]) + (a[2] + a[3]);
+        if both {
+            line(acc[0]) + line(acc[1])
+        } else {
+            line(acc[0])
+        }
+    }
+
     /// Inverse-transforms the `lines` rows of `src` (row stride `stride`; times `weight`, laid out
     /// as `src`) and returns `Σ w (y − x)²` against the rows of `y` with weights `w` (row-major,
     /// length n); the samples are also written to `keep` (row-major) when given.
@@ -639,27 +686,31 @@ impl Dct1d {
         let mut total = 0.0;
         for q0 in (0..rows).step_by(BLOCK / 2) {
             let nq = (rows - q0).min(BLOCK / 2);
-            let LineScratch { c2, fft, sink, .. } = s;
+            let LineScratch { c2, fft, sink, block, .. } = s;
             self.inv.process_outofplace_with_scratch(&mut c[q0 * n..(q0 + nq) * n], &mut c2[..nq * n], fft);
             for (i, v) in c2.chunks_exact(n).take(nq).enumerate() {
                 let ra = 2 * (q0 + i);
                 let both = ra + 1 < n0;
                 let rb = if both { ra + 1 } else { ra };
-                if let Some(out) = keep.as_deref_mut() {
-                    if both {
+                // The pair's two sample rows: into `keep`, or into scratch when only the RSS is asked.
+                let (a, b): (&mut [f64], &mut [f64]) = match keep.as_deref_mut() {
+                    Some(out) if both => {
                         let (a, b) = out[ra * n..].split_at_mut(n);
-                        self.unpack_inverse_rows(v, a, &mut b[..n]);
-                    } else {
-                        self.unpack_inverse_rows(v, &mut out[ra * n..][..n], &mut sink[..n]);
+                        (a, &mut b[..n])
                     }
-                }
-                if let Some((y, w)) = rss {
-                    let (ya, yb, wa, wb) = (&y[ra * n..][..n], &y[rb * n..][..n], &w[ra * n..][..n], &w[rb * n..][..n]);
-                    total += if both {
-                        self.rss_pair::<true>(v, [ya, yb], [wa, wb])
-                    } else {
-                        self.rss_pair::<false>(v, [ya, yb], [wa, wb])
-                    };
+                    Some(out) => (&mut out[ra * n..][..n], &mut sink[..n]),
+                    None => {
+                        let (a, b) = block.split_at_mut(n);
+                        (&mut a[..n], &mut b[..n])
+                    }
+                };
+                match rss {
+                    Some((y, w)) => {
+                        let (ya, yb, wa, wb) =
+                            (&y[ra * n..][..n], &y[rb * n..][..n], &w[ra * n..][..n], &w[rb * n..][..n]);
+                        total += self.unpack_rss_pair(v, a, b, [ya, yb], [wa, wb], both);
+                    }
+                    None => self.unpack_inverse_rows(v, a, b),
                 }
             }
         }

@@ -182,6 +182,53 @@ pub(super) unsafe fn rss_pair(lo: &[C64], hi: &[C64], y: [&[f64]; 2], w: [&[f64]
     (body, [e, o])
 }
 
+/// Body of `Dct1d::unpack_rss_pair`: over blocks of two q, the samples `x[2q] = v_q`,
+/// `x[2q + 1] = v_(n−1−q)` of lines a (real parts) and b (imaginary parts) are written to `x` and
+/// `w (y − x) (y − x)` (as `(w·d)·d`) is added to the lanes (sample index mod 4) of each line's
+/// sum. `lo = v[..h]`, `hi = v[n − h..]`; `x`, `y`, `w` hold lines a and b (length ≥ 2h). Returns
+/// the q done (a multiple of 2) and the two lines' lanes.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn unpack_rss(
+    lo: &[C64],
+    hi: &[C64],
+    x: [&mut [f64]; 2],
+    y: [&[f64]; 2],
+    w: [&[f64]; 2],
+) -> (usize, [[f64; 4]; 2]) {
+    let h = hi.len();
+    let [xa, xb] = x;
+    assert!(lo.len() >= h && xa.len() >= 2 * h && xb.len() >= 2 * h);
+    assert!(y.iter().chain(&w).all(|s| s.len() >= 2 * h));
+    let body = h / 2 * 2;
+    let mut q0 = 0;
+    let (mut acc_a, mut acc_b) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    while q0 < body {
+        // SAFETY: q0 + 2 ≤ h ≤ lo.len(), h − 2 − q0 ≥ 0, 2q0 + 4 ≤ 2h (lengths asserted above).
+        unsafe {
+            let e = _mm256_loadu_pd(lo.as_ptr().add(q0).cast::<f64>());
+            let o = swap_halves(_mm256_loadu_pd(hi.as_ptr().add(h - 2 - q0).cast::<f64>()));
+            let (a, b) = (_mm256_unpacklo_pd(e, o), _mm256_unpackhi_pd(e, o));
+            _mm256_storeu_pd(xa.as_mut_ptr().add(2 * q0), a);
+            _mm256_storeu_pd(xb.as_mut_ptr().add(2 * q0), b);
+            let ld = |s: &[f64]| _mm256_loadu_pd(s.as_ptr().add(2 * q0));
+            let (da, db) = (_mm256_sub_pd(ld(y[0]), a), _mm256_sub_pd(ld(y[1]), b));
+            acc_a = _mm256_add_pd(acc_a, _mm256_mul_pd(_mm256_mul_pd(ld(w[0]), da), da));
+            acc_b = _mm256_add_pd(acc_b, _mm256_mul_pd(_mm256_mul_pd(ld(w[1]), db), db));
+        }
+        q0 += 2;
+    }
+    let (mut a, mut b) = ([0.0; 4], [0.0; 4]);
+    // SAFETY: 4 writable f64 each.
+    unsafe {
+        _mm256_storeu_pd(a.as_mut_ptr(), acc_a);
+        _mm256_storeu_pd(b.as_mut_ptr(), acc_b);
+    }
+    (body, [a, b])
+}
+
 /// Four consecutive complex numbers at `p` as (real parts, imaginary parts), lanes in order.
 ///
 /// # Safety
