@@ -80,6 +80,9 @@ pub struct Smoothn {
     robust_w: Vec<f64>,
     lambda_m: Vec<f64>,
     lambda_key: Option<(u32, Vec<f64>)>,
+    /// `Some(n)` when `lambda_m` is an n × n array equal to its transpose (square grid, equal
+    /// spacing): Γ is then divided on one triangle and mirrored.
+    lambda_square: Option<usize>,
     gamma: Vec<f64>,
     power: Vec<f64>,
     /// Per-chunk partial sums of [`gamma_sums`].
@@ -152,6 +155,7 @@ impl Smoothn {
             robust_w: vec![1.0; n],
             lambda_m: vec![0.0; n],
             lambda_key: None,
+            lambda_square: None,
             gamma: vec![0.0; n],
             power: vec![0.0; n],
             partials: Vec::with_capacity(n.div_ceil(CHUNK)),
@@ -517,12 +521,18 @@ impl Smoothn {
             lm[p] = l.powi(m as i32);
         });
         self.lambda_key = Some((m, self.spacing.clone()));
+        self.lambda_square = match self.shape[..] {
+            [a, b] if a == b && (0..a).all(|i| (0..i).all(|j| lm[i * a + j].to_bits() == lm[j * a + i].to_bits())) => {
+                Some(a)
+            }
+            _ => None,
+        };
     }
 
     /// `Γ = 1 / (1 + S Λ^m)`.
     fn set_gamma(&mut self, s: f64) {
         // The GCV's kernel (the same operation per element, vectorised); its sums are not needed.
-        gamma_sums(&mut self.gamma, &self.lambda_m, None, s, &mut self.partials);
+        gamma_sums(&mut self.gamma, &self.lambda_m, None, s, self.lambda_square, &mut self.partials);
     }
 
     /// Minimises the GCV score over log10 S; returns (log10 S, evaluations).
@@ -546,7 +556,8 @@ impl Smoothn {
         let score = |p: f64| -> f64 {
             let s = 10f64.powf(p);
             let power = fast_rss.then_some(self.power.as_slice());
-            let [tr_h, fast] = gamma_sums(&mut self.gamma, &self.lambda_m, power, s, &mut self.partials);
+            let [tr_h, fast] =
+                gamma_sums(&mut self.gamma, &self.lambda_m, power, s, self.lambda_square, &mut self.partials);
             let rss = if fast_rss {
                 fast
             } else {
