@@ -36,6 +36,21 @@ pub fn valid_median(r: &[f64], valid: &[bool], scratch: &mut [f64]) -> f64 {
 /// Median absolute deviation of the residual vectors: `median over valid points of |r − mmed|₂`.
 pub fn vector_mad<R: AsRef<[f64]>>(residuals: &[R], valid: &[bool], mmed: &[f64], scratch: &mut Vec<f64>) -> f64 {
     scratch.clear();
+    if valid.iter().all(|v| *v) {
+        // Every point valid: the same sums component by component (contiguous loops that
+        // vectorise), then the square roots.
+        scratch.resize(valid.len(), 0.0);
+        for (c, (r, m)) in residuals.iter().zip(mmed).enumerate() {
+            let r = &r.as_ref()[..scratch.len()];
+            if c == 0 {
+                scratch.iter_mut().zip(r).for_each(|(s, r)| *s = -0.0 + (r - m).powi(2));
+            } else {
+                scratch.iter_mut().zip(r).for_each(|(s, r)| *s += (r - m).powi(2));
+            }
+        }
+        scratch.iter_mut().for_each(|s| *s = s.sqrt());
+        return median(scratch);
+    }
     for p in (0..valid.len()).filter(|&p| valid[p]) {
         let ad2: f64 = residuals.iter().zip(mmed).map(|(r, m)| (r.as_ref()[p] - m).powi(2)).sum();
         scratch.push(ad2.sqrt());
@@ -109,6 +124,34 @@ pub fn robust_weights<R: AsRef<[f64]>>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vector_mad_of_complete_data_matches_the_per_point_formula() {
+        let r: Vec<Vec<f64>> = (0..3)
+            .map(|c| (0..101).map(|i| ((i * (c + 2)) as f64 * 0.61).cos() * (1.0 + c as f64)).collect())
+            .collect();
+        let mmed = [0.1, -0.2, 0.05];
+        for comps in 1..=3 {
+            let mut per_point: Vec<f64> = (0..101)
+                .map(|p| r[..comps].iter().zip(&mmed).map(|(r, m)| (r[p] - m).powi(2)).sum::<f64>().sqrt())
+                .collect();
+            let expected = median(&mut per_point);
+            let mut scratch = Vec::new();
+            let got = vector_mad(&r[..comps], &[true; 101], &mmed[..comps], &mut scratch);
+            assert_eq!(got.to_bits(), expected.to_bits(), "{comps} components");
+            // One invalid point: the per-point path, the same value as leaving the point out.
+            let mut valid = [true; 101];
+            valid[7] = false;
+            per_point.clear();
+            per_point.extend(
+                (0..101)
+                    .filter(|p| *p != 7)
+                    .map(|p| r[..comps].iter().zip(&mmed).map(|(r, m)| (r[p] - m).powi(2)).sum::<f64>().sqrt()),
+            );
+            let got = vector_mad(&r[..comps], &valid, &mmed[..comps], &mut scratch);
+            assert_eq!(got.to_bits(), median(&mut per_point).to_bits());
+        }
+    }
 
     #[test]
     fn median_matches_definition_for_odd_and_even_counts() {

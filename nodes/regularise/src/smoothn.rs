@@ -478,8 +478,13 @@ impl Smoothn {
         if pym {
             // One median of every component's residuals (PyMUST).
             self.scratch.clear();
+            let all = finite.iter().all(|f| *f);
             for c in &self.comps {
-                self.scratch.extend(c.buf.iter().zip(finite).filter(|(_, ok)| **ok).map(|(v, _)| *v));
+                if all {
+                    self.scratch.extend_from_slice(&c.buf);
+                } else {
+                    self.scratch.extend(c.buf.iter().zip(finite).filter(|(_, ok)| **ok).map(|(v, _)| *v));
+                }
             }
             let m = robust::median(&mut self.scratch);
             self.medians.resize(self.comps.len(), m);
