@@ -359,10 +359,8 @@ impl Smoothn {
                 nit += 1;
                 let (plan, wtot) = (&self.plan, &self.wtot);
                 for_each_component(&mut self.comps, |c| {
-                    for (((b, w), y), z) in c.buf.iter_mut().zip(wtot).zip(&c.y).zip(&c.z) {
-                        *b = w * (y - z) + z;
-                    }
-                    plan.forward(&c.buf, &mut c.dcty, &mut c.dct);
+                    // DCT of the pseudo-data Wtot (y − z) + z.
+                    plan.forward_pseudo((&c.y, &c.z, wtot), &mut c.buf, &mut c.dcty, &mut c.dct);
                 });
                 if auto && nit.is_power_of_two() {
                     let (p, evals) = self.minimise_gcv(s_bounds, fast_rss, pym, nof, noe);

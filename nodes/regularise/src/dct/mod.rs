@@ -42,6 +42,14 @@ type C64 = Complex<f64>;
 /// Lines transformed together (in pairs, through one batched FFT call).
 pub const BLOCK: usize = 8;
 
+/// Rows of a two-axis forward transform's input: stored, or the pseudo-data `w (y − z) + z`
+/// formed row by row as the transform reads them (`y`, `z` row-major like the input, `w` too).
+#[derive(Clone, Copy)]
+pub(super) enum RowSource<'a> {
+    Data(&'a [f64]),
+    Pseudo { y: &'a [f64], z: &'a [f64], w: &'a [f64] },
+}
+
 /// Scratch buffers of a block of 1-D transforms (sized for the longest line of a plan).
 pub struct LineScratch {
     c1: Vec<C64>,
@@ -724,7 +732,8 @@ impl Dct1d {
     /// `w_(n0−1−p) = (X_k[2p+1], X_(n1−k)[2p+1])` (row 0: the pair (0, n1/2), or (0, zeros) for odd
     /// n1), written to `out[P·n0 + …]` for line pair P = k ([`Self::finish_forward_pairs`]). `out`
     /// holds ⌊(n1 − 1)/2⌋ + 1 rows of n0.
-    pub(super) fn forward_rows_into_next(&self, src: &[f64], next: &Dct1d, out: &mut [C64], s: &mut LineScratch) {
+    #[inline(always)]
+    pub(super) fn forward_rows_into_next(&self, src: RowSource, next: &Dct1d, out: &mut [C64], s: &mut LineScratch) {
         let n0 = next.n;
         let full = n0 / 2;
         let mut p0 = 0;
@@ -746,9 +755,10 @@ impl Dct1d {
 
     /// One FFT call of [`Self::forward_rows_into_next`]: row pairs p0 … p0 + np (`half`: the last
     /// row of an odd n0, alone).
+    #[inline(always)]
     fn forward_pair_block(
         &self,
-        src: &[f64],
+        src: RowSource,
         n0: usize,
         (p0, np, half): (usize, usize, bool),
         out: &mut [C64],
@@ -756,13 +766,29 @@ impl Dct1d {
     ) {
         let n1 = self.n;
         let m1 = (n1 - 1) / 2;
-        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let LineScratch { c1, c2, fft, zeros, block, .. } = s;
         let zeros = &zeros[..n1];
         for i in 0..np {
             let p = p0 + i;
-            let xa = &src[2 * p * n1..][..n1];
-            let xb = if half { zeros } else { &src[(2 * p + 1) * n1..][..n1] };
-            self.pack_forward(&mut c1[i * n1..(i + 1) * n1], xa, xb);
+            match src {
+                RowSource::Data(src) => {
+                    let xa = &src[2 * p * n1..][..n1];
+                    let xb = if half { zeros } else { &src[(2 * p + 1) * n1..][..n1] };
+                    self.pack_forward(&mut c1[i * n1..(i + 1) * n1], xa, xb);
+                }
+                RowSource::Pseudo { y, z, w } => {
+                    let (xa, xb) = block[..2 * n1].split_at_mut(n1);
+                    let rows = if half { 1 } else { 2 };
+                    for (r, x) in [&mut *xa, &mut *xb].into_iter().take(rows).enumerate() {
+                        let o = (2 * p + r) * n1;
+                        for (((x, y), z), w) in x.iter_mut().zip(&y[o..o + n1]).zip(&z[o..o + n1]).zip(&w[o..o + n1]) {
+                            *x = w * (y - z) + z;
+                        }
+                    }
+                    let xb: &[f64] = if half { zeros } else { xb };
+                    self.pack_forward(&mut c1[i * n1..(i + 1) * n1], xa, xb);
+                }
+            }
         }
         self.fwd.process_outofplace_with_scratch(&mut c1[..np * n1], &mut c2[..np * n1], fft);
         let c = &c2[..np * n1];

@@ -129,6 +129,65 @@ impl DctN {
         self.forward_body(input, output, s);
     }
 
+    /// [`Self::forward`] of the pseudo-data `w (y − z) + z` (smoothn's iteration; `w` laid out as
+    /// the grid): on a two-axis grid the rows are formed as the transform reads them, otherwise in
+    /// `work` first. The same values as forming the array and calling [`Self::forward`].
+    ///
+    /// # Panics
+    /// If a slice length differs from [`Self::len`] or the scratch belongs to another plan.
+    pub fn forward_pseudo(
+        &self,
+        (y, z, w): (&[f64], &[f64], &[f64]),
+        work: &mut [f64],
+        output: &mut [f64],
+        s: &mut DctNScratch,
+    ) {
+        assert!(
+            [y.len(), z.len(), w.len(), work.len(), output.len()].iter().all(|l| *l == self.len),
+            "DctN::forward_pseudo: wrong slice length"
+        );
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU supports AVX2 (checked at run time).
+            return unsafe { self.forward_pseudo_avx2((y, z, w), work, output, s) };
+        }
+        self.forward_pseudo_body((y, z, w), work, output, s);
+    }
+
+    /// [`Self::forward_pseudo`] compiled for AVX2 (same operations, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn forward_pseudo_avx2(
+        &self,
+        yzw: (&[f64], &[f64], &[f64]),
+        work: &mut [f64],
+        output: &mut [f64],
+        s: &mut DctNScratch,
+    ) {
+        self.forward_pseudo_body(yzw, work, output, s);
+    }
+
+    #[inline(always)]
+    fn forward_pseudo_body(
+        &self,
+        (y, z, w): (&[f64], &[f64], &[f64]),
+        work: &mut [f64],
+        output: &mut [f64],
+        s: &mut DctNScratch,
+    ) {
+        if self.plans.len() == 2 {
+            let (p0, p1) = (&self.plans[0], &self.plans[1]);
+            let DctNScratch { line, pairs, .. } = s;
+            p1.forward_rows_into_next(super::RowSource::Pseudo { y, z, w }, p0, pairs, line);
+            p0.finish_forward_pairs(pairs, p1.len(), output, line);
+            return;
+        }
+        for (((b, w), y), z) in work.iter_mut().zip(w).zip(y).zip(z) {
+            *b = w * (y - z) + z;
+        }
+        self.forward_body(work, output, s);
+    }
+
     /// [`Self::forward`] compiled for AVX2 (same operations, so the same bits).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
@@ -153,7 +212,7 @@ impl DctN {
         if k == 2 {
             // Along a1, fused with the preparation of the pass along a0 (see `Dct1d::forward_rows_into_next`).
             let (p0, p1) = (&self.plans[0], &self.plans[1]);
-            p1.forward_rows_into_next(input, p0, pairs, line);
+            p1.forward_rows_into_next(super::RowSource::Data(input), p0, pairs, line);
             p0.finish_forward_pairs(pairs, p1.len(), output, line);
             return;
         }
