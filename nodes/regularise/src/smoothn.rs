@@ -421,19 +421,28 @@ impl Smoothn {
     fn ingest(&mut self, data: &[f64], weights: Option<&[f64]>, pym: bool) -> Result<(usize, f64), SmoothnError> {
         let (n, ncomp) = (self.n, self.comps.len());
         // Missing values and weights (zero weight where any component is not finite).
-        let mut max_w = 0.0f64;
-        let mut nof = 0usize;
-        for p in 0..n {
-            let fin = (0..ncomp).all(|c| data[c * n + p].is_finite());
-            let wp = weights.map_or(1.0, |w| w[p]);
-            if !(wp.is_finite() && wp >= 0.0) {
-                return Err(SmoothnError::InvalidWeight { index: p, value: wp });
+        // Component by component and point by point in contiguous loops (they vectorise); the
+        // same mask, weights, count and maximum as one loop over the points.
+        if let Some(w) = weights {
+            if let Some(p) = w.iter().position(|wp| !(wp.is_finite() && *wp >= 0.0)) {
+                return Err(SmoothnError::InvalidWeight { index: p, value: w[p] });
             }
-            self.finite[p] = fin;
-            self.w[p] = if fin { wp } else { 0.0 };
-            nof += usize::from(fin);
-            max_w = max_w.max(self.w[p]);
         }
+        for (c, comp) in data.chunks_exact(n).take(ncomp).enumerate() {
+            if c == 0 {
+                self.finite.iter_mut().zip(comp).for_each(|(f, d)| *f = d.is_finite());
+            } else {
+                self.finite.iter_mut().zip(comp).for_each(|(f, d)| *f &= d.is_finite());
+            }
+        }
+        match weights {
+            Some(w) => {
+                self.w.iter_mut().zip(w).zip(&self.finite).for_each(|((o, w), f)| *o = if *f { *w } else { 0.0 })
+            }
+            None => self.w.iter_mut().zip(&self.finite).for_each(|(o, f)| *o = if *f { 1.0 } else { 0.0 }),
+        }
+        let nof = self.finite.iter().filter(|f| **f).count();
+        let max_w = self.w.iter().fold(0.0f64, |m, w| m.max(*w));
         if max_w <= 0.0 {
             return Err(SmoothnError::NoValidData { points: n });
         }
