@@ -21,7 +21,9 @@
 //! pairs as the lanes of AVX2 vectors (one 64-byte row segment per coefficient). Two axes (the
 //! smoother's case) take a fused path: the first pass pairs the lines so that each pair's FFT
 //! output holds what the second pass's FFT input needs, which is written directly (see
-//! `Dct1d::inverse_rows_into_next` and `Dct1d::forward_rows_into_next`).
+//! `Dct1d::inverse_rows_into_next` and `Dct1d::forward_rows_into_next`); on that path the
+//! weighted residual sum is taken in the same pass that unpacks the inverse's samples, and
+//! [`DctN::forward_pseudo`] forms smoothn's pseudo-data row by row as the transform reads them.
 //!
 //! A plan ([`DctN`]) is immutable and shareable across threads; each thread brings its own
 //! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
