@@ -413,14 +413,7 @@ impl Dct1d {
             // SAFETY: AVX2 is available.
             done = unsafe { simd::unpack_inverse_rows(lo, hi, xa, xb) };
         }
-        for q in done..h {
-            let (e, o) = (lo[q], hi[h - 1 - q]);
-            (xa[2 * q], xb[2 * q]) = (e.re, e.im);
-            (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
-        }
-        if n & 1 == 1 {
-            (xa[n - 1], xb[n - 1]) = (lo[h].re, lo[h].im);
-        }
+        unpack_rows_from(lo, hi, xa, xb, done);
     }
 
     /// [`Self::unpack_inverse_rows`] that also returns `Σ w (y − x)²` (as `(w·d)·d`) of line a,
@@ -449,14 +442,7 @@ impl Dct1d {
             // SAFETY: AVX2 is available.
             (done, acc) = unsafe { simd::unpack_rss(lo, hi, [&mut *xa, &mut *xb], [ya, yb], [wa, wb]) };
         }
-        for q in done..h {
-            let (e, o) = (lo[q], hi[h - 1 - q]);
-            (xa[2 * q], xb[2 * q]) = (e.re, e.im);
-            (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
-        }
-        if n & 1 == 1 {
-            (xa[n - 1], xb[n - 1]) = (lo[h].re, lo[h].im);
-        }
+        unpack_rows_from(lo, hi, xa, xb, done);
         for i in 2 * done..n {
             let (da, db) = (ya[i] - xa[i], yb[i] - xb[i]);
             acc[0][i % 4] += wa[i] * da * da;
@@ -884,6 +870,22 @@ fn transpose_block(block: &[f64], lines: usize, n: usize, dst: &mut [f64], c0: u
         for (l, d) in d.iter_mut().enumerate().skip(l_start) {
             *d = block[l * n + k];
         }
+    }
+}
+
+/// Scalar part of the inverse's unpacking (after `done` pairs of the vector kernel):
+/// `x_2q = v_q`, `x_2q+1 = v_(n−1−q)` (line a the real parts, b the imaginary ones), and for odd
+/// n `x_(n−1) = v_(n/2)`; `lo = v[..n − h]`, `hi = v[n − h..]`, h = n/2 = `hi.len()`.
+#[inline(always)]
+fn unpack_rows_from(lo: &[C64], hi: &[C64], xa: &mut [f64], xb: &mut [f64], done: usize) {
+    let (n, h) = (xa.len(), hi.len());
+    for q in done..h {
+        let (e, o) = (lo[q], hi[h - 1 - q]);
+        (xa[2 * q], xb[2 * q]) = (e.re, e.im);
+        (xa[2 * q + 1], xb[2 * q + 1]) = (o.re, o.im);
+    }
+    if n & 1 == 1 {
+        (xa[n - 1], xb[n - 1]) = (lo[h].re, lo[h].im);
     }
 }
 
