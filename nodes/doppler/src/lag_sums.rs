@@ -228,8 +228,9 @@ const PREFETCH_BYTES: usize = 2048;
 #[inline(always)]
 fn prefetch_ahead(data: &[C32], at: usize, len: usize) {
     use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-    let base = data.as_ptr().cast::<i8>().wrapping_add(at * 8 + PREFETCH_BYTES);
-    for off in (0..len * 8).step_by(64) {
+    let bytes = std::mem::size_of::<C32>();
+    let base = data.as_ptr().cast::<i8>().wrapping_add(at * bytes + PREFETCH_BYTES);
+    for off in (0..len * bytes).step_by(64) {
         // SAFETY: a prefetch is a hint; it does not read memory architecturally nor fault.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(off)) };
     }
