@@ -112,6 +112,11 @@ fn dctn_matches_naive_and_round_trips_in_1d_2d_3d_4d() {
         vec![3, 2],
         vec![2, 3],
         vec![9, 10],
+        // powers of two 16 … 512 in full blocks: the AVX-512 four-line FFT where the CPU has it
+        // (naive error ~ ε n ≤ 3e-14 at n = 128)
+        vec![64, 128],
+        vec![32, 16],
+        vec![16, 8, 32],
     ] {
         let plan = DctN::new(&shape);
         let len = plan.len();

@@ -25,7 +25,7 @@ impl Dct1d {
     ) {
         let (n0, n1) = (self.n, next.n);
         let m = (n1 - 1) / 2;
-        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let LineScratch { c1, c2, fft, zeros, lanes, .. } = s;
         let zeros = &zeros[..n0];
         // Pack the pair (ka, kb) (kb = None: zeros) into complex line p of c1.
         let pack = |c1: &mut [C64], p: usize, ka: usize, kb: Option<usize>| {
@@ -43,7 +43,7 @@ impl Dct1d {
         };
         // Row 0 with row n1/2 (even n1) or zeros.
         pack(c1, 0, 0, (n1 & 1 == 0).then_some(n1 / 2));
-        self.inv.process_outofplace_with_scratch(&mut c1[..n0], &mut c2[..n0], fft);
+        self.inv.process(&mut c1[..n0], &mut c2[..n0], fft, lanes);
         next.fuse_ends(&c2[..n0], n0, out);
         // Rows (k, n1 − k), k = 1 … m, four pairs per FFT call.
         let mut k0 = 1;
@@ -58,7 +58,7 @@ impl Dct1d {
             for p in 0..np {
                 pack(c1, p, k0 + p, Some(n1 - k0 - p));
             }
-            self.inv.process_outofplace_with_scratch(&mut c1[..np * n0], &mut c2[..np * n0], fft);
+            self.inv.process(&mut c1[..np * n0], &mut c2[..np * n0], fft, lanes);
             #[allow(unused_mut)]
             let mut q_done = 0;
             #[cfg(target_arch = "x86_64")]
@@ -126,8 +126,8 @@ impl Dct1d {
         let mut total = 0.0;
         for q0 in (0..rows).step_by(BLOCK / 2) {
             let nq = (rows - q0).min(BLOCK / 2);
-            let LineScratch { c2, fft, sink, block, .. } = s;
-            self.inv.process_outofplace_with_scratch(&mut c[q0 * n..(q0 + nq) * n], &mut c2[..nq * n], fft);
+            let LineScratch { c2, fft, sink, block, lanes, .. } = s;
+            self.inv.process(&mut c[q0 * n..(q0 + nq) * n], &mut c2[..nq * n], fft, lanes);
             for (i, v) in c2.chunks_exact(n).take(nq).enumerate() {
                 let ra = 2 * (q0 + i);
                 let both = ra + 1 < n0;
@@ -198,7 +198,7 @@ impl Dct1d {
     ) {
         let n1 = self.n;
         let m1 = (n1 - 1) / 2;
-        let LineScratch { c1, c2, fft, zeros, block, .. } = s;
+        let LineScratch { c1, c2, fft, zeros, block, lanes, .. } = s;
         let zeros = &zeros[..n1];
         for i in 0..np {
             let p = p0 + i;
@@ -222,7 +222,7 @@ impl Dct1d {
                 }
             }
         }
-        self.fwd.process_outofplace_with_scratch(&mut c1[..np * n1], &mut c2[..np * n1], fft);
+        self.fwd.process(&mut c1[..np * n1], &mut c2[..np * n1], fft, lanes);
         let c = &c2[..np * n1];
         // Line pair 0: X_0 and X_(n1/2) = 2 Re(a) V (zeros for odd n1).
         let (a0, ah) = (2.0 * self.a[0].re, 2.0 * self.a[n1 / 2].re);
@@ -268,8 +268,8 @@ impl Dct1d {
         let rows = (n1 - 1) / 2 + 1;
         for r0 in (0..rows).step_by(BLOCK / 2) {
             let nr = (rows - r0).min(BLOCK / 2);
-            let LineScratch { c2, fft, sink, .. } = s;
-            self.fwd.process_outofplace_with_scratch(&mut w[r0 * n..(r0 + nr) * n], &mut c2[..nr * n], fft);
+            let LineScratch { c2, fft, sink, lanes, .. } = s;
+            self.fwd.process(&mut w[r0 * n..(r0 + nr) * n], &mut c2[..nr * n], fft, lanes);
             for (i, v) in c2.chunks_exact(n).take(nr).enumerate() {
                 let k = r0 + i;
                 let kb = if k == 0 { (n1 & 1 == 0).then_some(n1 / 2) } else { Some(n1 - k) };

@@ -29,6 +29,8 @@
 //! [`DctNScratch`], so repeated transforms of the same shape allocate nothing.
 
 mod fused;
+#[cfg(target_arch = "x86_64")]
+mod lanes;
 mod nd;
 #[cfg(target_arch = "x86_64")]
 mod simd;
@@ -63,10 +65,12 @@ pub struct LineScratch {
     sink: Vec<f64>,
     /// The real lines of a block, row-major, before they are written transposed.
     block: Vec<f64>,
+    /// Work space of the AVX-512 four-line FFT (empty where no plan uses it).
+    lanes: Vec<f64>,
 }
 
 impl LineScratch {
-    fn new(max_len: usize, fft_len: usize) -> Self {
+    fn new(max_len: usize, fft_len: usize, lanes_len: usize) -> Self {
         let c = BLOCK / 2 * max_len;
         Self {
             c1: vec![C64::default(); c],
@@ -75,12 +79,56 @@ impl LineScratch {
             zeros: vec![0.0; max_len],
             sink: vec![0.0; max_len],
             block: vec![0.0; BLOCK * max_len],
+            lanes: vec![0.0; lanes_len],
         }
     }
 
     fn bytes(&self) -> usize {
         (self.c1.capacity() + self.c2.capacity() + self.fft.capacity()) * std::mem::size_of::<C64>()
-            + (self.zeros.capacity() + self.sink.capacity() + self.block.capacity()) * std::mem::size_of::<f64>()
+            + (self.zeros.capacity() + self.sink.capacity() + self.block.capacity() + self.lanes.capacity())
+                * std::mem::size_of::<f64>()
+    }
+}
+
+/// The FFTs of one length and direction: RustFFT, and where the CPU has AVX-512F and the length
+/// is a power of two in 16 ..= 512, the four-line kernel of `lanes` for full blocks.
+struct LineFft {
+    rust: Arc<dyn Fft<f64>>,
+    #[cfg(target_arch = "x86_64")]
+    lanes: Option<lanes::LanesFft>,
+}
+
+impl LineFft {
+    fn new(n: usize, inverse: bool, planner: &mut FftPlanner<f64>) -> Self {
+        Self {
+            rust: if inverse { planner.plan_fft_inverse(n) } else { planner.plan_fft_forward(n) },
+            #[cfg(target_arch = "x86_64")]
+            lanes: lanes::LanesFft::new(n, inverse),
+        }
+    }
+
+    /// f64 of [`LineScratch::lanes`] this transform needs.
+    fn lanes_len(&self) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        if self.lanes.is_some() {
+            return lanes::work_len(self.rust.len());
+        }
+        0
+    }
+
+    /// The FFT of each line of `input` (whole lines of this length) into `output`; `input` may be
+    /// overwritten (RustFFT uses it as scratch).
+    #[inline(always)]
+    fn process(&self, input: &mut [C64], output: &mut [C64], fft: &mut [C64], lanes_work: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(l) = &self.lanes {
+            if input.len() == BLOCK / 2 * self.rust.len() {
+                l.process4(input, output, lanes_work);
+                return;
+            }
+        }
+        let _ = lanes_work;
+        self.rust.process_outofplace_with_scratch(input, output, fft);
     }
 }
 
@@ -88,8 +136,8 @@ impl LineScratch {
 /// of one complex line (both transforms are real-linear) through one complex FFT of length n.
 pub struct Dct1d {
     n: usize,
-    fwd: Arc<dyn Fft<f64>>,
-    inv: Arc<dyn Fft<f64>>,
+    fwd: LineFft,
+    inv: LineFft,
     /// `a_k = σ_k e^{-iθ_k} / 2`, θ_k = πk/2n: `X_k = a_k V_k + conj(a_k) V_(n−k)` (V_n = V_0).
     a: Vec<C64>,
     /// Real and imaginary parts of `a`.
@@ -119,8 +167,8 @@ impl Dct1d {
         let b_dup = [dup(&|c| c.re), dup(&|c| c.im), dup(&|c| -c.im)];
         Self {
             n,
-            fwd: planner.plan_fft_forward(n),
-            inv: planner.plan_fft_inverse(n),
+            fwd: LineFft::new(n, false, planner),
+            inv: LineFft::new(n, true, planner),
             a,
             a_re,
             a_im,
@@ -147,12 +195,16 @@ impl Dct1d {
     }
 
     fn fft_scratch_len(&self) -> usize {
-        self.fwd.get_outofplace_scratch_len().max(self.inv.get_outofplace_scratch_len())
+        self.fwd.rust.get_outofplace_scratch_len().max(self.inv.rust.get_outofplace_scratch_len())
+    }
+
+    fn lanes_scratch_len(&self) -> usize {
+        self.fwd.lanes_len().max(self.inv.lanes_len())
     }
 
     /// Scratch buffers for this length.
     pub fn make_scratch(&self) -> LineScratch {
-        LineScratch::new(self.n, self.fft_scratch_len())
+        LineScratch::new(self.n, self.fft_scratch_len(), self.lanes_scratch_len())
     }
 
     /// Orthonormal DCT-II of `x` into `y` (both of length [`Self::len`]).
@@ -195,7 +247,7 @@ impl Dct1d {
     ) {
         let n = self.n;
         let pairs = lines.div_ceil(2);
-        let LineScratch { c1, c2, fft, zeros, .. } = s;
+        let LineScratch { c1, c2, fft, zeros, lanes, .. } = s;
         let zeros = &zeros[..n];
         fn pick<'a>(buf: &'a [f64], l: usize, (lines, stride): (usize, usize), zeros: &'a [f64]) -> &'a [f64] {
             if l < lines {
@@ -214,7 +266,7 @@ impl Dct1d {
             }
         }
         let plan = if inverse { &self.inv } else { &self.fwd };
-        plan.process_outofplace_with_scratch(&mut c1[..pairs * n], &mut c2[..pairs * n], fft);
+        plan.process(&mut c1[..pairs * n], &mut c2[..pairs * n], fft, lanes);
     }
 
     /// `v_q = x_2q` (q < ⌈n/2⌉), `v_(n−1−q) = x_2q+1`, lines a and b as real and imaginary parts.

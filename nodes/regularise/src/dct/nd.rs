@@ -99,6 +99,7 @@ impl DctN {
     pub fn make_scratch(&self) -> DctNScratch {
         let max_n = self.plans.iter().map(Dct1d::len).max().unwrap_or(1);
         let fft = self.plans.iter().map(Dct1d::fft_scratch_len).max().unwrap_or(0);
+        let lanes = self.plans.iter().map(Dct1d::lanes_scratch_len).max().unwrap_or(0);
         let tmp_len = if self.plans.len() >= 3 { self.len } else { 0 };
         let pairs_len = match self.plans.len() {
             2 => {
@@ -109,7 +110,7 @@ impl DctN {
             _ => 0,
         };
         DctNScratch {
-            line: LineScratch::new(max_n, fft),
+            line: LineScratch::new(max_n, fft, lanes),
             tmp: vec![0.0; tmp_len],
             pairs: vec![C64::default(); pairs_len],
         }
