@@ -16,7 +16,8 @@
 //! eigenvectors (reflective boundaries), with eigenvalues
 //! `Λ(k) = Σ_a (2 − 2 cos(π k_a / n_a)) / dI_a²` (`dI` = spacing normalised by its maximum). Hence
 //! * unweighted data: `z = IDCT(Γ ∘ DCT(y))`, `Γ = 1 / (1 + S Λ^m)`, orthonormal N-D DCT
-//!   ([`dct`], via `rustfft`, O(n log n) for any length);
+//!   ([`dct`], via `rustfft` and, with AVX-512F, a four-line kernel for power-of-two lengths
+//!   16–512; O(n log n) for any length);
 //! * weights / missing values (NaN, ±inf; weight 0): iterate
 //!   `z ← RF · IDCT(Γ ∘ DCT(W∘(y − z) + z)) + (1 − RF) z` (RF = 1.75 for weighted data) until
 //!   `‖Δz‖/‖z‖ ≤ tol_z`, from an initial guess (nearest-neighbour fill, then the lowest ~10 % of the

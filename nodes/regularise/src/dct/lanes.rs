@@ -2,10 +2,12 @@
 //! of each vector: a 512-bit register holds element j of all four lines (four complex f64), so
 //! every butterfly and twiddle is the same for its four lanes and the transform needs no
 //! shuffles inside a line. RustFFT has no AVX-512 code and transforms one line at a time with
-//! 256-bit shuffles; for the four-line blocks of this crate's DCT this kernel is 1.2–1.7× faster
-//! for lengths 16 … 512 on a Zen 5 host (1.7× at 128; BENCHMARKS.md §11) and slower from 1024 on,
-//! so [`LanesFft::new`] plans only 16 ≤ n ≤ 512. Everything else stays with RustFFT, which is also
-//! the reference of the tests (agreement to rounding; the two sum in different orders).
+//! 256-bit shuffles; with this kernel a 2-D DCT of 64² or 128² takes 22–25 % less time on a Zen 5
+//! host, 256² and 512² 3–14 % less (`dct_timing`, BENCHMARKS.md §11). From 1024 on its two work
+//! vectors per element outgrow the L1 cache (a micro-benchmark had it slower than RustFFT at 1024
+//! and 2048), so [`LanesFft::new`] plans only 16 ≤ n ≤ 512. Everything else stays with RustFFT,
+//! which is also the reference of the tests (agreement to rounding; the two sum in different
+//! orders).
 //!
 //! Algorithm: Stockham autosort, radix 4 (decimation in frequency; OTFFT's formulation), the
 //! last stage radix 8 when log₂ n is odd (its even and odd outputs in turn). The first stage reads the line-major input and the last
