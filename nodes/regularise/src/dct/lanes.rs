@@ -10,9 +10,10 @@
 //! orders).
 //!
 //! Algorithm: Stockham autosort, radix 4 (decimation in frequency; OTFFT's formulation), the
-//! last stage radix 8 when log₂ n is odd (its even and odd outputs in turn). The first stage reads the line-major input and the last
-//! one writes the line-major output through 4 × 4 transposes of 128-bit blocks; the stages in
-//! between ping-pong between two element-major buffers (2n vectors, L1-resident up to n = 256).
+//! last stage radix 8 when log₂ n is odd (its even and odd outputs in turn). The first stage reads
+//! the line-major input and the last one writes the line-major output through 4 × 4 transposes of
+//! 128-bit blocks; the stages in between ping-pong between two element-major buffers (2n vectors,
+//! L1-resident up to n = 256).
 //! Unnormalised like RustFFT: forward `X_k = Σ x_j e^{−2πijk/n}`, inverse with `e^{+2πijk/n}`.
 
 use std::arch::x86_64::*;
