@@ -39,7 +39,12 @@ use sonoflow_beamform::error::{check_len, invalid, positive, BeamformError, Resu
 use sonoflow_beamform::DasPlan;
 use sonoflow_beamform::C32;
 
-use crate::lag_sums::{lag_sums_row, LagAcc};
+use crate::lag_sums::{lag_sums_frames_row, lag_sums_row};
+
+thread_local! {
+    /// Scratch of [`lag_sums_frames_row`] per worker thread (12 × 2nx f64; reused across packets).
+    static ROW_ACC: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+}
 
 type C64 = Complex<f64>;
 
@@ -528,22 +533,8 @@ impl DopplerEstimator {
         // layouts use this order, so they give bit-identical maps.
         self.r0.par_chunks_mut(nx).zip(self.r1.par_chunks_mut(nx)).enumerate().for_each(|(iz, (r0, r1))| {
             if let Packet::Frames(fr) = pk {
-                // stream each frame's row into the partial sums of its lane
-                let row = iz * nx..(iz + 1) * nx;
-                let mut acc = vec![LagAcc::default(); nx];
-                for (k, f) in fr.iter().enumerate() {
-                    for (q, x) in acc.iter_mut().zip(&f[row.clone()]) {
-                        q.add_power(k & 3, x);
-                    }
-                }
-                for k in 0..nf - lag {
-                    for ((q, a), b) in acc.iter_mut().zip(&fr[k][row.clone()]).zip(&fr[k + lag][row.clone()]) {
-                        q.add_lag(k & 3, a, b);
-                    }
-                }
-                for (ix, q) in acc.iter().enumerate() {
-                    (r0[ix], r1[ix]) = q.finish();
-                }
+                // Stream each frame's row into the partial sums of its lane (arrays over the row).
+                ROW_ACC.with_borrow_mut(|acc| lag_sums_frames_row(fr, iz * nx, lag, (r0, r1), acc));
                 return;
             }
             if let Packet::PixelMajor { data, n_frames } = pk {

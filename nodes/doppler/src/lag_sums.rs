@@ -1,7 +1,8 @@
 //! A pixel's slow-time sums R0 = Σ|x_k|² and R_L = Σ x_k·conj(x_{k+L}) (eq. 19's autocorrelation
-//! at lag L) in a fixed summation order: frame by frame ([`LagAcc`], the frame-major packets) and
-//! four frames at a time over contiguous frames (pixel-major packets: portable, AVX-512 and AVX2
-//! kernels). Every path gives the same bits.
+//! at lag L) in a fixed summation order ([`LagAcc`]'s lanes): frame by frame for frame-major
+//! packets (a row at a time, the lanes as arrays over the row) and four frames at a time over
+//! contiguous frames for pixel-major ones (portable, AVX-512 and AVX2 kernels). Every path gives
+//! the same bits.
 
 use num_complex::Complex;
 use sonoflow_beamform::C32;
@@ -27,15 +28,17 @@ pub(crate) struct LagAcc {
 }
 
 impl LagAcc {
-    #[inline(always)]
-    pub(crate) fn add_power(&mut self, lane: usize, x: &C32) {
+    /// Frame k's power into lane `k mod 4` (the reference order of the tests).
+    #[cfg(test)]
+    fn add_power(&mut self, lane: usize, x: &C32) {
         let (r, i) = (f64::from(x.re), f64::from(x.im));
         self.p0[2 * lane] += r * r;
         self.p0[2 * lane + 1] += i * i;
     }
 
-    #[inline(always)]
-    pub(crate) fn add_lag(&mut self, lane: usize, a: &C32, b: &C32) {
+    /// Frame k's lag products into lane `k mod 4` (the reference order of the tests).
+    #[cfg(test)]
+    fn add_lag(&mut self, lane: usize, a: &C32, b: &C32) {
         let (ar, ai, br, bi) = (f64::from(a.re), f64::from(a.im), f64::from(b.re), f64::from(b.im));
         self.p1[2 * lane] += ar * br;
         self.p1[2 * lane + 1] += ai * bi;
@@ -275,6 +278,86 @@ pub(crate) fn lag_sums_row(data: &[C32], n_frames: usize, lag: usize, r0: &mut [
     row(data, n_frames, lag, r0, r1)
 }
 
+/// [`LagAcc`] of every pixel of one row of frame-major frames (`frames[k][start..start + r0.len()]`),
+/// with the lanes laid out as arrays over the row so that the frame-by-frame updates are
+/// element-wise and vectorise: for lane l = k mod 4, `p0_l[j] += x_j²`, `p1_l[j] += a_j b_j`,
+/// `q1_l[j] += a_j b_(j xor 1)` over the row's interleaved f32 parts j (a = frame k, b = frame
+/// k + lag). Each pixel's lanes receive the same products in the same frame order as
+/// [`LagAcc::add_power`] / [`LagAcc::add_lag`], so the same bits. `acc` is scratch (resized).
+pub(crate) fn lag_sums_frames_row(
+    frames: &[&[C32]],
+    start: usize,
+    lag: usize,
+    (r0, r1): (&mut [f64], &mut [C64]),
+    acc: &mut Vec<f64>,
+) {
+    #[inline(always)]
+    fn body(frames: &[&[C32]], start: usize, lag: usize, (r0, r1): (&mut [f64], &mut [C64]), acc: &mut Vec<f64>) {
+        let nx = r0.len();
+        let w = 2 * nx;
+        acc.clear();
+        acc.resize(12 * w, 0.0);
+        let parts = |f: &[C32]| -> &[f32] {
+            let row = &f[start..start + nx];
+            // SAFETY: `Complex<f32>` is `#[repr(C)] { re, im }`, so nx samples are 2nx contiguous f32.
+            unsafe { std::slice::from_raw_parts(row.as_ptr().cast::<f32>(), w) }
+        };
+        // Lane l's arrays: p0 at 3lw, p1 at (3l + 1)w, q1 at (3l + 2)w.
+        for (k, f) in frames.iter().enumerate() {
+            let p0 = &mut acc[3 * (k & 3) * w..][..w];
+            for (p, x) in p0.iter_mut().zip(parts(f)) {
+                let x = f64::from(*x);
+                *p += x * x;
+            }
+        }
+        for k in 0..frames.len() - lag {
+            let (a, b) = (parts(frames[k]), parts(frames[k + lag]));
+            let (p1, q1) = acc[(3 * (k & 3) + 1) * w..][..2 * w].split_at_mut(w);
+            for (((p1, q1), a), b) in
+                p1.chunks_exact_mut(2).zip(q1.chunks_exact_mut(2)).zip(a.chunks_exact(2)).zip(b.chunks_exact(2))
+            {
+                let (ar, ai, br, bi) = (f64::from(a[0]), f64::from(a[1]), f64::from(b[0]), f64::from(b[1]));
+                p1[0] += ar * br;
+                p1[1] += ai * bi;
+                q1[0] += ar * bi;
+                q1[1] += ai * br;
+            }
+        }
+        for (ix, (r0, r1)) in r0.iter_mut().zip(r1.iter_mut()).enumerate() {
+            let mut one = LagAcc::default();
+            for l in 0..4 {
+                for c in 0..2 {
+                    let j = 2 * ix + c;
+                    one.p0[2 * l + c] = acc[3 * l * w + j];
+                    one.p1[2 * l + c] = acc[(3 * l + 1) * w + j];
+                    one.q1[2 * l + c] = acc[(3 * l + 2) * w + j];
+                }
+            }
+            (*r0, *r1) = one.finish();
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f,avx512vl")]
+        unsafe fn avx512(f: &[&[C32]], start: usize, lag: usize, r: (&mut [f64], &mut [C64]), acc: &mut Vec<f64>) {
+            body(f, start, lag, r, acc);
+        }
+        #[target_feature(enable = "avx2")]
+        unsafe fn avx2(f: &[&[C32]], start: usize, lag: usize, r: (&mut [f64], &mut [C64]), acc: &mut Vec<f64>) {
+            body(f, start, lag, r, acc);
+        }
+        if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("avx512vl") {
+            // SAFETY: the CPU has AVX-512F and VL (checked above).
+            return unsafe { avx512(frames, start, lag, (r0, r1), acc) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked above).
+            return unsafe { avx2(frames, start, lag, (r0, r1), acc) };
+        }
+    }
+    body(frames, start, lag, (r0, r1), acc)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -309,6 +392,49 @@ mod tests {
             }
             let r0: f64 = s.iter().map(|x| f64::from(x.norm_sqr())).sum();
             assert!((want.0 - r0).abs() < 1e-5 * r0, "R0 against a plain sum");
+        }
+    }
+
+    /// The frame-major row kernel gives, pixel by pixel, the bits of [`LagAcc`] fed frame by
+    /// frame (row offsets, row lengths with and without a vector tail, several lags, and a second
+    /// call reusing the scratch).
+    #[test]
+    fn frame_major_rows_match_lag_acc_bit_for_bit() {
+        let mut scratch = Vec::new();
+        for (nf, lag, nx) in [(2usize, 1usize, 1usize), (5, 1, 7), (32, 1, 13), (33, 4, 16), (9, 8, 3)] {
+            let rows = 3;
+            let frames: Vec<Vec<C32>> = (0..nf)
+                .map(|k| {
+                    (0..rows * nx)
+                        .map(|p| {
+                            C32::new(((k * 31 + p) as f32 * 0.7).sin() * 3.0, ((k + 7 * p) as f32 * 1.3).cos() - 0.2)
+                        })
+                        .collect()
+                })
+                .collect();
+            let refs: Vec<&[C32]> = frames.iter().map(|f| &f[..]).collect();
+            for row in 0..rows {
+                let (mut r0, mut r1) = (vec![f64::NAN; nx], vec![C64::new(f64::NAN, 0.0); nx]);
+                lag_sums_frames_row(&refs, row * nx, lag, (&mut r0, &mut r1), &mut scratch);
+                for ix in 0..nx {
+                    let p = row * nx + ix;
+                    let mut acc = LagAcc::default();
+                    for (k, f) in frames.iter().enumerate() {
+                        acc.add_power(k & 3, &f[p]);
+                    }
+                    for k in 0..nf - lag {
+                        acc.add_lag(k & 3, &frames[k][p], &frames[k + lag][p]);
+                    }
+                    let (w0, w1) = acc.finish();
+                    let what = format!("nf {nf} lag {lag} nx {nx} row {row} ix {ix}");
+                    assert_eq!(r0[ix].to_bits(), w0.to_bits(), "R0, {what}");
+                    assert_eq!(
+                        (r1[ix].re.to_bits(), r1[ix].im.to_bits()),
+                        (w1.re.to_bits(), w1.im.to_bits()),
+                        "R1, {what}"
+                    );
+                }
+            }
         }
     }
 }
