@@ -230,9 +230,17 @@ const PREFETCH_BYTES: usize = 2048;
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn prefetch_ahead(data: &[C32], at: usize, len: usize) {
+    prefetch_ahead_by(data, at, len, PREFETCH_BYTES);
+}
+
+/// Prefetches the cache lines of `data[at..at + len]` shifted by `ahead` bytes (a hint: addresses
+/// past the end of `data` are never dereferenced).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn prefetch_ahead_by(data: &[C32], at: usize, len: usize, ahead: usize) {
     use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
     let bytes = std::mem::size_of::<C32>();
-    let base = data.as_ptr().cast::<i8>().wrapping_add(at * bytes + PREFETCH_BYTES);
+    let base = data.as_ptr().cast::<i8>().wrapping_add(at * bytes + ahead);
     for off in (0..len * bytes).step_by(64) {
         // SAFETY: a prefetch is a hint; it does not read memory architecturally nor fault.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(off)) };
@@ -304,6 +312,9 @@ pub(crate) fn lag_sums_frames_row(
         };
         // Lane l's arrays: p0 at 3lw, p1 at (3l + 1)w, q1 at (3l + 2)w.
         for (k, f) in frames.iter().enumerate() {
+            // The next row of this frame (the next task's, on one thread) on its way from memory.
+            #[cfg(target_arch = "x86_64")]
+            prefetch_ahead_by(f, start + nx, nx, 0);
             let p0 = &mut acc[3 * (k & 3) * w..][..w];
             for (p, x) in p0.iter_mut().zip(parts(f)) {
                 let x = f64::from(*x);
